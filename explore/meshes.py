@@ -1,0 +1,104 @@
+"""Loading triangle meshes (OBJ with polygons, STL, PLY) as plain vertex/triangle arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .typed import Points3, Pose
+
+
+@dataclass(frozen=True)
+class TriMesh:
+    """A triangle mesh: vertices (n, 3) float64 and triangles (m, 3) int32."""
+
+    vertices: Points3
+    triangles: np.ndarray
+
+    def transformed(self, pose: Pose, scale: np.ndarray | float = 1.0) -> TriMesh:
+        scaled = self.vertices * np.asarray(scale, dtype=float)
+        return TriMesh(scaled @ pose[:3, :3].T + pose[:3, 3], self.triangles)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    def to_open3d(self):  # -> open3d.geometry.TriangleMesh
+        import open3d as o3d
+
+        mesh = o3d.geometry.TriangleMesh(
+            o3d.utility.Vector3dVector(self.vertices), o3d.utility.Vector3iVector(self.triangles)
+        )
+        mesh.compute_vertex_normals()
+        return mesh
+
+    def area(self) -> float:
+        a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
+        return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+    @staticmethod
+    def concatenate(meshes: list[TriMesh]) -> TriMesh:
+        vertices, triangles, offset = [], [], 0
+        for mesh in meshes:
+            vertices.append(mesh.vertices)
+            triangles.append(mesh.triangles + offset)
+            offset += len(mesh.vertices)
+        if not vertices:
+            return TriMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32))
+        return TriMesh(np.vstack(vertices), np.vstack(triangles).astype(np.int32))
+
+
+def box_mesh(size: np.ndarray) -> TriMesh:
+    """Axis-aligned box centred at the origin with full extents ``size``."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_box(*size)
+    vertices = np.asarray(mesh.vertices) - np.asarray(size) / 2.0
+    return TriMesh(vertices, np.asarray(mesh.triangles, dtype=np.int32))
+
+
+def cylinder_mesh(radius: float, length: float, resolution: int = 48) -> TriMesh:
+    """Closed cylinder along z centred at the origin."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_cylinder(radius, length, resolution)
+    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int32))
+
+
+def sphere_mesh(radius: float, resolution: int = 24) -> TriMesh:
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius, resolution)
+    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int32))
+
+
+def read_obj(path: Path) -> TriMesh:
+    """Read an OBJ file, fan-triangulating polygons (Open3D drops quads)."""
+    vertices: list[list[float]] = []
+    triangles: list[list[int]] = []
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        for line in handle:
+            if line.startswith("v "):
+                vertices.append([float(x) for x in line.split()[1:4]])
+            elif line.startswith("f "):
+                refs = [int(token.split("/")[0]) for token in line.split()[1:]]
+                idx = [r - 1 if r > 0 else len(vertices) + r for r in refs]
+                triangles.extend([idx[0], idx[i], idx[i + 1]] for i in range(1, len(idx) - 1))
+    if not vertices or not triangles:
+        raise ValueError(f"{path}: no triangles")
+    return TriMesh(np.asarray(vertices, dtype=float), np.asarray(triangles, dtype=np.int32))
+
+
+def read_mesh(path: str | Path) -> TriMesh:
+    """Read OBJ, STL or PLY into a :class:`TriMesh`."""
+    path = Path(path)
+    if path.suffix.lower() == ".obj":
+        return read_obj(path)
+    import open3d as o3d
+
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise ValueError(f"{path}: no triangles")
+    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int32))
