@@ -29,3 +29,4 @@ class FreeFlyer(Robot):
 
     def ik(self, world_T_sensor: Pose, rng: np.random.Generator | None = None) -> Array | None:
         return np.concatenate([world_T_sensor[:3, 3], Rotation.from_matrix(world_T_sensor[:3, :3]).as_rotvec()])
+PLUGINS = [FreeFlyer]

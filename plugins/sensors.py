@@ -113,3 +113,4 @@ class LaserStriper(RaySensor):
         """The fan lies in the sensor's x-z plane; a scan path moves along the sensor's y."""
         angles = np.deg2rad(np.linspace(-self.fan_deg / 2.0, self.fan_deg / 2.0, self.beams))
         return np.column_stack([np.sin(angles), np.zeros_like(angles), np.cos(angles)])
+PLUGINS = [DepthCamera, LaserStriper]

@@ -1,0 +1,5 @@
+"""Built-in behaviour plugins."""
+
+from __future__ import annotations
+
+PLUGINS: list = []

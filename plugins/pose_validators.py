@@ -1,0 +1,5 @@
+"""Built-in pose_validator plugins."""
+
+from __future__ import annotations
+
+PLUGINS: list = []

@@ -1,0 +1,5 @@
+"""Built-in registrar plugins."""
+
+from __future__ import annotations
+
+PLUGINS: list = []

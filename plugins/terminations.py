@@ -1,0 +1,5 @@
+"""Built-in termination plugins."""
+
+from __future__ import annotations
+
+PLUGINS: list = []

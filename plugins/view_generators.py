@@ -1,0 +1,5 @@
+"""Built-in view_generator plugins."""
+
+from __future__ import annotations
+
+PLUGINS: list = []
