@@ -28,8 +28,12 @@ def register(app: typer.Typer) -> None:
         look_from: Annotated[str, typer.Option("--look-from", help="Sensor position x,y,z [m].")],
         look_at: Annotated[str, typer.Option("--look-at", help="Point the sensor looks at x,y,z [m].")],
         out: Annotated[Path, typer.Option("--out", "-o", help="Output point cloud (.ply).")] = Path("scan.ply"),
-        sensor: Annotated[str | None, typer.Option("--sensor", "-s", help="Sensor plugin (default: the world's).")] = None,
-        set_: Annotated[list[str] | None, typer.Option("--set", help="Sensor parameter key=value (repeatable).")] = None,
+        sensor: Annotated[
+            str | None, typer.Option("--sensor", "-s", help="Sensor plugin (default: the world's).")
+        ] = None,
+        set_: Annotated[
+            list[str] | None, typer.Option("--set", help="Sensor parameter key=value (repeatable).")
+        ] = None,
         sweep: Annotated[float, typer.Option("--sweep", min=0.0, help="Scan path length for line sensors [m].")] = 0.3,
         png: Annotated[Path | None, typer.Option("--png", help="Also save a picture of the scan.")] = None,
         seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,

@@ -14,7 +14,8 @@ def register(app: typer.Typer) -> None:
     @sub.command("list")
     def list_worlds() -> None:
         """List the world files in the search path (./worlds, the shipped worlds, $EXPLORE_WORLDS)."""
-        from explore.world import list_worlds as find, load_world_spec
+        from explore.world import list_worlds as find
+        from explore.world import load_world_spec
 
         from .main import console
 

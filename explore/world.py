@@ -21,6 +21,7 @@ from .errors import BadInput
 from .typed import Array
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
+TOP_LEVEL_FIELDS = ("name", "description", "environment", "objects", "region", "robot", "sensor", "overview")
 BODY_SUFFIXES = MESH_SUFFIXES + (".urdf", ".sdf")
 
 
@@ -152,7 +153,11 @@ class _Fields:
         value = self.get(key, default)
         sizes = (n,) if isinstance(n, int) else n
         if not isinstance(value, list | tuple) or len(value) not in sizes:
-            raise BadInput(self.source, self.where(key), f"expected a list of {' or '.join(map(str, sizes))} numbers, got {value!r}")
+            raise BadInput(
+                self.source,
+                self.where(key),
+                f"expected a list of {' or '.join(map(str, sizes))} numbers, got {value!r}",
+            )
         return np.array([self._finite(v, f"{self.where(key)}[{i}]") for i, v in enumerate(value)])
 
     def number(self, key: str, default: Any = ..., positive: bool = False) -> float:
@@ -183,7 +188,9 @@ class _Fields:
     def check_unknown(self) -> None:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise BadInput(self.source, self.where(unknown[0]), f"unknown field (valid: {', '.join(sorted(self.used))})")
+            raise BadInput(
+                self.source, self.where(unknown[0]), f"unknown field (valid: {', '.join(sorted(self.used))})"
+            )
 
 
 def resolve_source(source: str, world_dir: Path, where: str, file: str) -> Path:
@@ -257,15 +264,15 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
     path = find_world(path_or_name)
     file = str(path)
     f = _Fields(load_yaml(path), file, "")
+    unknown = sorted(set(f.data) - set(TOP_LEVEL_FIELDS))
+    if unknown:
+        raise BadInput(file, unknown[0], f"unknown field (valid: {', '.join(TOP_LEVEL_FIELDS)})")
     name = f.string("name", path.stem)
     description = f.get("description", "") or ""
     environment = tuple(
-        _body(item, file, f"environment[{i}]", path.parent, False)
-        for i, item in enumerate(_list(f, "environment"))
+        _body(item, file, f"environment[{i}]", path.parent, False) for i, item in enumerate(_list(f, "environment"))
     )
-    objects = tuple(
-        _body(item, file, f"objects[{i}]", path.parent, True) for i, item in enumerate(_list(f, "objects"))
-    )
+    objects = tuple(_body(item, file, f"objects[{i}]", path.parent, True) for i, item in enumerate(_list(f, "objects")))
     names = [b.name for b in environment + objects]
     for i, body_name in enumerate(names):
         if body_name in names[:i]:

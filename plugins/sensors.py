@@ -84,7 +84,7 @@ class LaserStriper(RaySensor):
     name = "laser_striper"
     geometry = "line"
     params = (
-        Param("beams", int, 224, "", "beams per stripe", low=2),
+        Param("beams_per_stripe", int, 224, "", "beams per stripe", low=2),
         Param("fan_deg", float, 24.0, "deg", "fan angle of the stripe (~14 cm wide at 325 mm)", low=0.1, high=170.0),
         Param("min_range", float, 0.15, "m", "near end of the depth of field", low=0.0),
         Param("max_range", float, 0.5, "m", "far end of the depth of field", low=0.01),
@@ -111,6 +111,6 @@ class LaserStriper(RaySensor):
 
     def local_directions(self) -> Points3:
         """The fan lies in the sensor's x-z plane; a scan path moves along the sensor's y."""
-        angles = np.deg2rad(np.linspace(-self.fan_deg / 2.0, self.fan_deg / 2.0, self.beams))
+        angles = np.deg2rad(np.linspace(-self.fan_deg / 2.0, self.fan_deg / 2.0, self.beams_per_stripe))
         return np.column_stack([np.sin(angles), np.zeros_like(angles), np.cos(angles)])
 PLUGINS = [DepthCamera, LaserStriper]

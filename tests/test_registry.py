@@ -1,0 +1,109 @@
+"""Plugin registry: entry-point discovery, lookup, duplicates, parameter validation."""
+
+from __future__ import annotations
+
+import pytest
+
+from explore.errors import BadInput, RegistryError
+from explore.hookspecs import hookimpl
+from explore.params import Param, validate_params
+from explore.registry import Registry
+
+
+def test_builtins_are_found_through_the_entry_point(registry) -> None:
+    from importlib import metadata
+
+    eps = [ep for ep in metadata.entry_points(group="explore.plugins") if ep.dist.name == "explore"]
+    assert [ep.value for ep in eps] == ["explore_plugins"]
+    info = registry.get("sensor", "depth_camera")
+    assert info.origin == "explore"
+    assert info.doc.startswith("Pinhole depth camera")
+    assert {"laser_striper", "depth_camera"} <= set(registry.names("sensor"))
+
+
+def test_unknown_name_lists_the_valid_names(registry) -> None:
+    with pytest.raises(RegistryError) as error:
+        registry.get("sensor", "lidar", "world.yaml", "sensor")
+    line = error.value.line()
+    assert "world.yaml: sensor: unknown sensor 'lidar'" in line
+    assert "depth_camera" in line and "laser_striper" in line
+
+
+class _Duplicate:
+    """A second laser striper."""
+
+    kind = "sensor"
+    name = "laser_striper"
+    params = ()
+
+
+class _Plugin:
+    @hookimpl
+    def explore_register_plugins(self, register) -> None:
+        register(_Duplicate)
+
+
+def test_duplicate_names_fail_with_both_origins() -> None:
+    with pytest.raises(RegistryError) as error:
+        Registry.load(extra=[("thirdparty", _Plugin())])
+    assert "registered twice: by explore and by thirdparty" in error.value.line()
+
+
+class _Extra:
+    """An extra sensor from a third-party package."""
+
+    kind = "sensor"
+    name = "extra_sensor"
+    params = (Param("gain", float, 1.0, "", "a gain", low=0.0),)
+
+    def __init__(self, gain: float) -> None:
+        self.gain = gain
+
+
+class _ExtraPlugin:
+    @hookimpl
+    def explore_register_plugins(self, register) -> None:
+        register(_Extra)
+
+
+def test_third_party_plugin_is_listed_with_its_origin_and_created_with_params() -> None:
+    reg = Registry.load(extra=[("acme-sensors", _ExtraPlugin())])
+    info = reg.get("sensor", "extra_sensor")
+    assert info.origin == "acme-sensors"
+    assert reg.create("sensor", "extra_sensor", {"gain": "2.5"}).gain == 2.5
+    with pytest.raises(BadInput, match="below the minimum"):
+        reg.create("sensor", "extra_sensor", {"gain": -1})
+    with pytest.raises(BadInput, match=r"unknown parameter \(valid: gain\)"):
+        reg.create("sensor", "extra_sensor", {"gian": 1})
+
+
+def test_parameters_convert_units_and_reject_wrong_ones() -> None:
+    declared = [
+        Param("max_range", float, 0.5, "m"),
+        Param("fan", float, 24.0, "deg"),
+        Param("beams", int, 224),
+        Param("noise", str, "none", choices=("none", "kinect")),
+    ]
+    values = validate_params(declared, {"max_range": "450 mm", "fan": "0.5 rad", "beams": 100}, "f.yaml")
+    assert values["max_range"] == pytest.approx(0.45)
+    assert values["fan"] == pytest.approx(28.6479, abs=1e-3)
+    assert values["noise"] == "none"
+    for bad, message in [
+        ({"max_range": "3 kg"}, "unknown unit"),
+        ({"max_range": "3 s"}, "wrong unit 's': expected m"),
+        ({"max_range": float("nan")}, "not a finite number"),
+        ({"beams": 2.5}, "expected an integer"),
+        ({"noise": "gauss"}, "is not one of"),
+        ({"max_range": [1]}, "expected a number"),
+    ]:
+        with pytest.raises(BadInput, match=message):
+            validate_params(declared, bad, "f.yaml")
+
+
+def test_plugins_list_cli_shows_kind_name_origin_doc(capsys) -> None:
+    from explore_cli.main import main
+
+    assert main(["plugins", "list", "--kind", "sensor"]) == 0
+    out = capsys.readouterr().out
+    assert "laser_striper" in out and "explore" in out and "sensor" in out
+    assert main(["plugins", "list", "--kind", "nonsense"]) == 2

@@ -1,0 +1,153 @@
+"""World files: every shipped world parses; placement; bad input is one line with exit 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from explore.errors import BadInput
+from explore.simulation import Simulation
+from explore.world import list_worlds, load_world_spec
+
+SHIPPED = {"bunny_pedestal", "tabletop", "cluttered", "workcell", "two_tables"}
+
+
+def test_required_worlds_are_shipped_and_parse() -> None:
+    names = {p.stem for p in list_worlds()}
+    assert SHIPPED <= names
+    for path in list_worlds():
+        spec = load_world_spec(path)
+        assert spec.objects, path
+        assert np.all(spec.region_max > spec.region_min)
+
+
+def test_tabletop_has_six_objects_two_known() -> None:
+    spec = load_world_spec("tabletop")
+    assert len(spec.objects) == 6
+    assert sorted(o.name for o in spec.objects if o.known) == ["duck", "mug"]
+
+
+def test_bunny_rests_on_the_pedestal_at_the_requested_size(bunny_sim) -> None:
+    bunny = bunny_sim.object_mesh("bunny")
+    lo, hi = bunny.bounds
+    assert np.max(hi - lo) == pytest.approx(0.15, abs=1e-9)
+    assert lo[2] == pytest.approx(0.5 + 5e-4, abs=1e-9)
+    np.testing.assert_allclose(0.5 * (lo[:2] + hi[:2]), [0.0, 0.0], atol=1e-9)
+    assert [b.name for b in bunny_sim.objects()] == ["bunny"]
+    assert len(bunny_sim.environment_ids()) == 1
+
+
+def test_urdf_bodies_match_pybullet(registry) -> None:
+    from explore.bullet import p
+
+    with Simulation("tabletop", registry) as sim:
+        for body in sim.objects():
+            lo, hi = body.mesh.bounds
+            aabb_lo, aabb_hi = (np.array(v) for v in p.getAABB(body.body_id, -1, physicsClientId=sim.client))
+            # pybullet's AABB adds a small margin around the collision shape
+            assert np.all(lo > aabb_lo - 0.03) and np.all(hi < aabb_hi + 0.03), body.name
+            assert body.mesh.bounds[0][2] >= 0.625 - 1e-6, body.name  # on the table top
+
+
+GOOD = """
+name: t
+environment:
+  - {name: pedestal, box: [0.1, 0.1, 0.5], position: [0, 0, 0.25]}
+objects:
+  - {name: bunny, source: bunny.obj, size: 0.1, position: [0, 0], on_top_of: pedestal}
+region: {min: [-0.2, -0.2, 0.5], max: [0.2, 0.2, 0.8]}
+sensor: laser_striper
+"""
+
+BAD = [
+    ("name: [unclosed\n", "malformed YAML"),
+    (GOOD.replace("bunny.obj", "nothing.obj"), "objects[0].source: file not found"),
+    (GOOD.replace("size: 0.1,", "size: .nan,"), "objects[0].size: nan is not a finite number"),
+    (
+        GOOD.replace("position: [0, 0, 0.25]", "position: [0, .inf, 0.25]"),
+        "environment[0].position[1]: inf is not a finite number",
+    ),
+    (GOOD.replace("size: 0.1,", "size: 0.5,"), "objects[0] (bunny): extends outside the region"),
+    (GOOD.replace("sensor: laser_striper", "sensor: lidar"), "sensor: unknown sensor 'lidar' (valid: "),
+    (
+        GOOD.replace("sensor: laser_striper", "sensor: {plugin: laser_striper, params: {beams_per_stripe: many}}"),
+        "sensor.params.beams_per_stripe: expected a number",
+    ),
+    (
+        GOOD.replace("sensor: laser_striper", "sensor: {plugin: laser_striper, params: {fan_deg: 3 kg}}"),
+        "sensor.params.fan_deg: unknown unit",
+    ),
+    (
+        GOOD.replace("sensor: laser_striper", "sensor: {plugin: laser_striper, params: {colour: 1}}"),
+        "sensor.params.colour: unknown parameter",
+    ),
+    (GOOD.replace("on_top_of: pedestal", "on_top_of: table"), "objects[0].on_top_of: no body named 'table'"),
+    (GOOD.replace("region:", "regoin:"), "regoin: unknown field"),
+]
+
+
+@pytest.mark.parametrize(("text", "message"), BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test_bad_world_is_one_clear_line(tmp_path, registry, text, message) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(BadInput) as error:
+        Simulation(load_world_spec(path), registry).close()
+    line = error.value.line()
+    assert line.startswith(str(path)) and message in line, line
+    assert "\n" not in line
+
+
+def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", "from explore_cli.main import run; run()", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=120,
+    )
+
+
+def test_cli_bad_world_exits_2_with_one_line_and_no_traceback(tmp_path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(GOOD.replace("size: 0.1,", "size: .nan,"))
+    result = _cli("worlds", "show", str(path))
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "objects[0].size" in lines[0] and "Traceback" not in result.stderr
+
+
+def test_cli_scan_writes_ply_and_png(tmp_path) -> None:
+    out, png = tmp_path / "scan.ply", tmp_path / "scan.png"
+    result = _cli(
+        "scan",
+        "--world",
+        "bunny_pedestal",
+        "--look-from",
+        "0.3,0,0.6",
+        "--look-at",
+        "0,0,0.56",
+        "--out",
+        str(out),
+        "--png",
+        str(png),
+    )
+    assert result.returncode == 0, result.stderr
+    import open3d as o3d
+
+    cloud = o3d.io.read_point_cloud(str(out))
+    assert len(cloud.points) > 5000
+    assert png.stat().st_size > 10000
+    assert "pybullet build time" not in result.stdout + result.stderr
+    bad = _cli("scan", "--world", "bunny_pedestal", "--look-from", "0.3,nan,0.6", "--look-at", "0,0,0.56")
+    assert bad.returncode == 2 and "--look-from" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_worlds_list_and_show(tmp_path) -> None:
+    result = _cli("worlds", "show", "bunny_pedestal")
+    assert result.returncode == 0, result.stderr
+    assert "bunny" in result.stdout and "laser_striper" in result.stdout and "region" in result.stdout
+    assert _cli("worlds", "show", "atlantis").returncode == 2
