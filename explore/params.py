@@ -66,10 +66,14 @@ class Param:
             return [_number(v, float, self.unit, source, f"{field}[{i}]") for i, v in enumerate(value)]
         if self.type in (int, float):
             out = _number(value, self.type, self.unit, source, field)
+            if self.type is int and self.low is not None:
+                self_low = int(self.low) if float(self.low).is_integer() else self.low
+            else:
+                self_low = self.low
             if self.low is not None and out < self.low:
-                raise BadInput(source, field, f"{out} is below the minimum {self.low} {self.unit}")
+                raise BadInput(source, field, f"{out} is below the minimum {self_low} {self.unit}".rstrip())
             if self.high is not None and out > self.high:
-                raise BadInput(source, field, f"{out} is above the maximum {self.high} {self.unit}")
+                raise BadInput(source, field, f"{out} is above the maximum {self.high} {self.unit}".rstrip())
         elif self.type is bool:
             if isinstance(value, bool):
                 out = value

@@ -1,0 +1,110 @@
+"""``explore run TREE --world W``: an exploration run with a live view of the tree."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Group
+from rich.panel import Panel
+from rich.table import Table
+from rich.text import Text
+
+_STATUS_STYLE = {"SUCCESS": "green", "FAILURE": "red", "RUNNING": "yellow", "INVALID": "dim"}
+
+
+def _tree_text(root: Any) -> Text:
+    text = Text()
+
+    def visit(node: Any, depth: int) -> None:
+        status = node.status.value
+        line = Text("  " * depth + f"{node.name}  ")
+        line.append(status.lower(), style=_STATUS_STYLE.get(status, ""))
+        if node.feedback_message and status != "INVALID":
+            line.append(f"  {node.feedback_message}", style="dim")
+        text.append(line)
+        text.append("\n")
+        for child in node.children:
+            visit(child, depth + 1)
+
+    visit(root, 0)
+    return text
+
+
+def live_view(root: Any, context: Any) -> Group:
+    """The tree with node statuses plus the run's numbers (scans, ĉ_m, coverage, time)."""
+    stats = Table.grid(padding=(0, 2))
+    stats.add_column(style="bold")
+    stats.add_column()
+    stats.add_row("world", context.sim.spec.name)
+    running = [n.name for n in root.iterate() if n.status.value == "RUNNING" and not n.children]
+    stats.add_row("step", ", ".join(running) or "-")
+    for provider in context.state.values():
+        if hasattr(provider, "live_stats"):
+            for key, value in provider.live_stats().items():
+                stats.add_row(key, value if isinstance(value, str) else f"{value:.3g}")
+    stats.add_row("elapsed", f"{context.elapsed():.1f} s")
+    return Group(Panel(_tree_text(root), title="tree"), Panel(stats, title="run"))
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("run")
+    def run(
+        tree: Annotated[str, typer.Argument(help="Tree name or file (see `explore tree list`).")],
+        world: Annotated[str, typer.Option("--world", "-w", help="World name or file.")],
+        strategy: Annotated[str | None, typer.Option("--strategy", help="NBV strategy (plugin kind strategy).")] = None,
+        planner: Annotated[str | None, typer.Option("--planner", help="Motion planner plugin.")] = None,
+        robot: Annotated[str | None, typer.Option("--robot", help="Robot plugin (default: the world's).")] = None,
+        sensor: Annotated[str | None, typer.Option("--sensor", help="Sensor plugin (default: the world's).")] = None,
+        seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same metrics).")] = 0,
+        max_scans: Annotated[int | None, typer.Option("--max-scans", min=1, help="Stop after this many scans.")] = None,
+        set_: Annotated[list[str] | None, typer.Option("--set", help="key=value override (repeatable).")] = None,
+        out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/<time>-...).")] = None,
+        rerun: Annotated[Path | None, typer.Option("--rerun", help="Also log to a Rerun .rrd file.")] = None,
+        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view.")] = False,
+    ) -> int:
+        """Run an exploration tree on a world; exit 0 on success, 1 if the mission failed."""
+        from rich.live import Live
+
+        from explore.run import RunConfig, execute
+
+        from .main import console, registry
+
+        config = RunConfig(
+            tree=tree, world=world, strategy=strategy, planner=planner, robot=robot, sensor=sensor, seed=seed,
+            max_scans=max_scans, settings=RunConfig.parse_settings(set_ or []), out=out,
+        )
+        if rerun is not None:
+            config.settings["rerun"] = str(rerun)
+        reg = registry()
+        interactive = console.is_terminal and not quiet
+        last = {"t": 0.0, "line": ""}
+
+        def plain_progress(root: Any, context: Any) -> None:
+            if quiet:
+                return
+            line = context.status_line
+            if line and line != last["line"]:
+                last["line"] = line
+                console.print(f"[{context.elapsed():6.1f} s] {line}", markup=False, highlight=False)
+
+        if interactive:
+            with Live(console=console, auto_refresh=False, transient=False) as live:
+
+                def on_tick(root: Any, context: Any) -> None:
+                    now = time.perf_counter()
+                    if now - last["t"] > 0.1 or root.status.value != "RUNNING":
+                        last["t"] = now
+                        live.update(live_view(root, context), refresh=True)
+
+                result = execute(config, reg, on_tick)
+        else:
+            result = execute(config, reg, plain_progress)
+        style = "green" if result.status == "success" else "red"
+        console.print(f"[{style}]{result.status}[/{style}]: {result.reason}")
+        summary = {k: result.metrics.get(k) for k in ("scans", "coverage", "coverage_estimate", "path_length_m")}
+        console.print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
+        console.print(f"results: {result.out_dir}")
+        return 0 if result.status == "success" else 1

@@ -1,0 +1,79 @@
+"""``explore tree show|validate|list``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from explore.errors import BadInput
+
+
+def _load(tree: str):
+    from explore.trees import load_tree
+
+    from .main import registry
+
+    reg = registry()
+    return load_tree(tree, reg), reg
+
+
+def register(app: typer.Typer) -> None:
+    sub = typer.Typer(help="Inspect and validate behaviour-tree files.", no_args_is_help=True)
+
+    @sub.command("validate")
+    def validate(tree: Annotated[str, typer.Argument(help="Tree name or file.")]) -> None:
+        """Check a tree file: node types, behaviours and their parameters, includes, cycles."""
+        from .main import console
+
+        parsed, _ = _load(tree)
+        nodes = list(parsed.root.walk())
+        behaviours = sum(1 for n in nodes if n.type == "behaviour")
+        console.print(f"{parsed.path}: valid ({len(nodes)} nodes, {behaviours} behaviours)")
+
+    @sub.command("show")
+    def show(
+        tree: Annotated[str, typer.Argument(help="Tree name or file.")],
+        format: Annotated[str, typer.Option("--format", "-f", help="unicode, dot or png.")] = "unicode",
+        out: Annotated[Path | None, typer.Option("--out", "-o", help="File for dot/png output.")] = None,
+    ) -> None:
+        """Print the tree (unicode), or write it as Graphviz dot or PNG."""
+        import py_trees
+
+        from explore.run_outputs import write_tree_diagram
+        from explore.trees import build
+
+        from .main import console
+
+        if format not in ("unicode", "dot", "png"):
+            raise BadInput("--format", None, f"expected unicode, dot or png, got {format!r}")
+        parsed, reg = _load(tree)
+        root = build(parsed.root, reg)
+        if format == "unicode":
+            console.print(py_trees.display.unicode_tree(root), markup=False, highlight=False)
+            return
+        if format == "dot" and out is None:
+            console.print(py_trees.display.dot_tree(root).to_string(), markup=False, highlight=False)
+            return
+        target = out or Path(f"{parsed.path.stem}.{format}")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        written = write_tree_diagram(root, target.parent, target.stem)
+        wanted = [p for p in written if p.suffix == f".{format}"]
+        if not wanted:
+            raise BadInput("--format", None, "png needs the Graphviz 'dot' program (apt-get install graphviz)")
+        if format == "png":
+            (target.parent / f"{target.stem}.dot").unlink(missing_ok=True)
+        console.print(f"-> {wanted[0]}")
+
+    @sub.command("list")
+    def list_() -> None:
+        """List the tree files in ./trees, the shipped trees and $EXPLORE_TREES."""
+        from explore.trees import list_trees
+
+        from .main import console
+
+        for path in list_trees():
+            console.print(f"{path.stem:24} {path}")
+
+    app.add_typer(sub, name="tree")
