@@ -1,0 +1,120 @@
+"""Motion planning: OMPL planners, dense re-checks, unknown space, scan paths, kinodynamic base."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from explore.geometry import look_at
+from explore.motion import MotionProblem, classify_blocked, linear_scan_path_ik, validate_path
+from explore.scan import ScanPath
+from explore.simulation import Simulation
+
+
+@pytest.fixture(scope="module")
+def workcell(registry):
+    with Simulation("workcell", registry) as sim:
+        yield sim
+
+
+@pytest.fixture(scope="module")
+def endpoints(workcell):
+    robot = workcell.robot
+    rng = np.random.default_rng(0)
+    a = robot.ik(look_at([0.45, -0.25, 0.85], [0.7, -0.2, 0.45]), rng)
+    b = robot.ik(look_at([0.45, 0.3, 0.85], [0.75, 0.2, 0.45]), rng)
+    assert a is not None and b is not None
+    return a, b
+
+
+@pytest.mark.parametrize("name", ["rrt_connect", "prm", "bit_star"])
+def test_planner_paths_are_collision_free_when_densely_rechecked(registry, workcell, endpoints, name) -> None:
+    problem = MotionProblem(workcell.robot)
+    planner = registry.get("motion_planner", name).create({"time_limit": 1.0, "try_direct": False})
+    plan = planner.plan(problem, *endpoints, seed=1)
+    assert plan is not None
+    assert np.allclose(plan.path[0], endpoints[0]) and np.allclose(plan.path[-1], endpoints[1])
+    assert validate_path(problem, plan.path, resolution=problem.resolution / 10, margin=0.0) is None
+    assert plan.length > 0
+
+
+def test_planner_avoids_a_known_obstacle(registry, workcell, endpoints) -> None:
+    """A goal below the table top is rejected; every path stays above the table."""
+    robot = workcell.robot
+    problem = MotionProblem(robot)
+    low = robot.ik(look_at([0.75, 0.0, 0.3], [0.75, 0.0, 0.0]), check_collision=False)
+    assert low is not None and not problem.is_valid(low)
+    assert registry.get("motion_planner", "rrt_connect").create({}).plan(problem, endpoints[0], low) is None
+
+
+def _clearing_scan(lo: np.ndarray, hi: np.ndarray):
+    """Vertical beams without a return through the box [lo, hi]: they prove it free."""
+    from explore.scan import Scan
+
+    g = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], 30), np.linspace(lo[1], hi[1], 30)), -1).reshape(-1, 2)
+    n = len(g)
+    origins = np.column_stack([g, np.full(n, hi[2] + 0.3)])
+    directions = np.tile([0.0, 0.0, -1.0], (n, 1))
+    nan = np.full(n, np.nan)
+    return Scan(origins, directions, nan, nan, np.eye(4)[None], np.zeros(1), np.zeros(n, int), 0.0, 1.0, True, True)
+
+
+def test_unknown_space_blocks_a_path_until_observed_free(workcell, endpoints) -> None:
+    """With the real PVS: unknown (p = 0.5) blocks the goal; after a clearing scan it is free."""
+    from explore.pvs import PVS
+
+    robot = workcell.robot
+    a, b = endpoints
+    tip = robot.fk(b)[:3, 3]
+    pvs = PVS(tip - 0.06, tip + 0.06, 0.02)
+    problem = MotionProblem(robot, space_free=pvs.is_free)
+    assert not problem.is_valid(b)
+    assert classify_blocked(robot, b[None], pvs.probability, space_free=pvs.is_free) == "unknown"  # keep for later
+    assert classify_blocked(robot, b[None], lambda x: np.maximum(pvs.probability(x), 0.9)) == "occupied"
+    for _ in range(3):
+        pvs.integrate(_clearing_scan(tip - 0.07, tip + 0.07))
+    assert problem.is_valid(b) and problem.is_valid_motion(a, b)
+    assert classify_blocked(robot, b[None], pvs.probability, space_free=pvs.is_free) == "free"
+
+
+def test_linear_scan_path_in_10mm_portions(workcell) -> None:
+    robot = workcell.robot
+    start = look_at([0.55, -0.12, 0.8], [0.75, -0.12, 0.45])
+    end = start.copy()
+    end[:3, 3] += 0.1 * start[:3, 0]  # 10 cm sideways (along the sensor's x)
+    result = linear_scan_path_ik(robot, ScanPath(start, end), step=0.01, problem=MotionProblem(robot))
+    assert result.complete and len(result.configs) == 11
+    assert np.max(np.abs(np.diff(result.configs, axis=0))) < 0.2
+    for q, pose in zip(result.configs, result.poses, strict=True):
+        assert np.linalg.norm(robot.fk(q)[:3, 3] - pose[:3, 3]) < 1e-3
+
+
+def test_straight_line_for_the_free_flyer(registry) -> None:
+    with Simulation("bunny_pedestal", registry) as sim:
+        robot = sim.robot
+        problem = MotionProblem(robot)
+        planner = registry.get("motion_planner", "straight_line").create({})
+        a = robot.ik(look_at([-0.3, 0.0, 0.62], [0.0, 0.0, 0.6]))
+        b = robot.ik(look_at([0.0, -0.3, 0.62], [0.0, 0.0, 0.6]))
+        assert planner.plan(problem, a, b) is not None
+        through_pedestal = robot.ik(look_at([0.3, 0.0, 0.3], [0.0, 0.0, 0.6]))
+        assert planner.plan(problem, robot.ik(look_at([-0.3, 0.0, 0.3], [0, 0, 0.6])), through_pedestal) is None
+
+
+def test_kinodynamic_base_plan_gives_controls_that_reach_the_goal(registry) -> None:
+    with Simulation("two_tables", registry) as sim:
+        robot = sim.robot
+        problem = MotionProblem(robot)
+        start = robot.q.copy()
+        goal = start.copy()
+        goal[:3] = (0.6, 0.3, 0.5)
+        goal[3] = 0.3
+        planner = registry.get("motion_planner", "kinodynamic").create({"time_limit": 5.0, "goal_tolerance": 0.1})
+        plan = planner.plan(problem, start, goal, seed=2)
+        assert plan is not None and plan.controls is not None
+        assert validate_path(problem, plan.path, resolution=problem.resolution / 10, margin=0.0) is None
+        run = robot.execute(plan, np.random.default_rng(0), noise=False)
+        assert np.allclose(run.final, plan.path[-1], atol=1e-6)
+        assert np.linalg.norm(run.final[:3] - goal[:3]) < 0.1 * np.sqrt(3) and abs(run.final[3] - goal[3]) < 1e-6
+        noisy = robot.execute(plan, np.random.default_rng(1))
+        assert not np.allclose(noisy.final[:3], plan.path[-1][:3])

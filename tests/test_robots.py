@@ -1,0 +1,143 @@
+"""Robot plugins: every world builds, FK/IK round trips, IK success, noisy execution statistics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from explore_plugins.robots import pose_error
+
+from explore.geometry import look_at
+from explore.motion import MotionPlan
+from explore.simulation import Simulation
+from explore.world import list_worlds
+
+
+@pytest.fixture(scope="module")
+def workcell(registry):
+    with Simulation("workcell", registry) as sim:
+        yield sim
+
+
+@pytest.fixture(scope="module")
+def two_tables(registry):
+    with Simulation("two_tables", registry) as sim:
+        yield sim
+
+
+@pytest.mark.parametrize("world", [w.stem for w in list_worlds()])
+def test_every_shipped_world_builds_with_a_valid_start(registry, world: str) -> None:
+    with Simulation(world, registry) as sim:
+        robot = sim.robot
+        assert robot.dof >= 3
+        if robot.name != "free_flyer":  # the free flyer has no start pose of its own
+            assert robot.collisions(robot.q, "true", 0.0) == []
+            assert np.allclose(robot.fk(robot.q)[:3, :3].T @ robot.fk(robot.q)[:3, :3], np.eye(3))
+
+
+def test_arm_fk_ik_round_trip_within_1mm_and_half_degree(workcell) -> None:
+    robot = workcell.robot
+    rng = np.random.default_rng(1)
+    worst = np.zeros(2)
+    for _ in range(10):
+        pose = robot.fk(robot.sample_config(rng))
+        q = robot.ik(pose, rng, check_collision=False)
+        assert q is not None
+        worst = np.maximum(worst, pose_error(robot.fk(q), pose))
+        assert robot.within_limits(q)
+    assert worst[0] <= 1e-3 and worst[1] <= math.radians(0.5)
+
+
+def region_view_poses(sim, count: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Views 0.3 m from points in the region, 20-50 deg off vertical, from the robot's side."""
+    base = np.asarray(sim.spec.robot.base[:2])
+    poses = []
+    for target in rng.uniform(sim.spec.region_min, sim.spec.region_max, size=(count, 3)):
+        toward = math.atan2(base[1] - target[1], base[0] - target[0]) + rng.uniform(-1.0, 1.0)
+        elevation = rng.uniform(math.radians(20), math.radians(50))
+        d = np.array(
+            [math.sin(elevation) * math.cos(toward), math.sin(elevation) * math.sin(toward), math.cos(elevation)]
+        )
+        poses.append(look_at(target + 0.3 * d, target))
+    return poses
+
+
+def test_arm_ik_success_over_the_workcell_region(workcell) -> None:
+    robot = workcell.robot
+    rng = np.random.default_rng(2)
+    solved = [robot.ik(pose, rng) for pose in region_view_poses(workcell, 20, rng)]
+    assert sum(q is not None for q in solved) >= 18
+    for q in solved:
+        if q is not None:
+            assert not robot.in_collision(q)
+
+
+def test_mobile_base_ik_round_trip_and_reachability(two_tables) -> None:
+    robot = two_tables.robot
+    rng = np.random.default_rng(3)
+    q = robot.q.copy()
+    q[3:] = (0.4, 0.5)
+    pose = robot.fk(q)
+    q2 = robot.ik(pose, rng)
+    assert q2 is not None
+    dp, da = pose_error(robot.fk(q2), pose)
+    assert dp <= 1e-3 and da <= math.radians(0.5)
+    too_high = pose.copy()
+    too_high[2, 3] += 0.5
+    assert robot.ik(too_high, rng) is None
+
+
+def test_mobile_manipulator_ik_round_trip(registry) -> None:
+    with Simulation("cluttered", registry) as sim:
+        robot = sim.robot
+        assert robot.dof >= 8
+        rng = np.random.default_rng(4)
+        pose = look_at([0.45, -0.35, 1.1], [0.0, 0.0, 0.8])
+        q = robot.ik(pose, rng)
+        assert q is not None
+        dp, da = pose_error(robot.fk(q), pose)
+        assert dp <= 1e-3 and da <= math.radians(0.5)
+        assert not robot.in_collision(q)
+
+
+def test_noise_statistics_match_the_model(two_tables) -> None:
+    """sigma_v = 1.65 mm/s, sigma_w = 0.28 rad/s, truncated at 3 sigma (Vasquez-Gomez Sec. A6)."""
+    robot = two_tables.robot
+    start = robot.q.copy()
+    goal = start.copy()
+    goal[0] += 0.6
+    controls, nominal = robot.controls_from_path(np.vstack([start, goal]))
+    rng = np.random.default_rng(5)
+    eps, finals = [], []
+    for _ in range(300):
+        configs, e, log_prob = robot.rollout(start, controls, rng)
+        eps.append(e)
+        finals.append(configs[-1])
+        assert np.isfinite(log_prob)
+    eps = np.vstack(eps)
+    sigma = robot.control_sigma()
+    assert np.all(np.abs(eps) <= 3 * sigma + 1e-12)
+    truncated_std = 0.9866 * sigma  # std of a normal truncated at +-3 sigma
+    used = sigma > 0
+    assert np.allclose(eps[:, used].std(axis=0), truncated_std[used], rtol=0.05)
+    assert np.allclose(eps[:, used].mean(axis=0), 0.0, atol=0.05 * sigma[used].max())
+    # heading error after k steps: sum of k independent errors * dt
+    k = len(controls)
+    theta_err = np.array(finals)[:, 2] - nominal[-1, 2]
+    expected = truncated_std[2] * robot.dt * math.sqrt(k)
+    assert abs(theta_err.std() / expected - 1.0) < 0.15
+    # without noise the rollout is the nominal path
+    configs, e, _ = robot.rollout(start, controls, rng, noise=False)
+    assert np.allclose(configs[-1], goal, atol=1e-9) and not e.any()
+
+
+def test_execution_records_collisions_with_the_true_world_only(registry) -> None:
+    with Simulation("bunny_pedestal", registry) as sim:
+        robot = sim.robot
+        a = robot.ik(look_at([-0.3, 0.0, 0.62], [0.0, 0.0, 0.6]))
+        b = robot.ik(look_at([0.3, 0.0, 0.62], [0.6, 0.0, 0.6]))
+        run = robot.execute(MotionPlan(np.vstack([a, b])), np.random.default_rng(0))
+        assert run.collided and "bunny" in run.collisions[0].bodies
+        known = robot.execute(MotionPlan(np.vstack([a, b])), np.random.default_rng(0), world="known")
+        assert not known.collided and np.allclose(known.final, b)
