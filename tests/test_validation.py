@@ -1,0 +1,78 @@
+"""PVS pose validation (Kriegel thesis Sec. 3.4, Eq. 3.11)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from explore.geometry import look_at
+from explore.validation import pvs_votes
+
+
+class _FixedPVS:
+    """Stand-in with the PVS query API: the occupancy p is the point's x coordinate."""
+
+    def probability(self, points: np.ndarray) -> np.ndarray:
+        return np.asarray(points)[:, 0]
+
+
+def test_equation_3_11_counts_and_score():
+    # p = 0.1, 0.2 (free), 0.5 (unknown), 0.75, 0.9 (occupied; 0.75 is occupied: p >= 0.75), 0.25 (unknown)
+    vertices = np.column_stack([[0.1, 0.2, 0.5, 0.75, 0.9, 0.25], np.zeros(6), np.zeros(6)])
+    result = pvs_votes(_FixedPVS(), vertices, np.eye(4))
+    assert (result.free, result.unknown, result.occupied) == (2, 2, 2)
+    assert result.score == pytest.approx((0.5 * 2 + 2) / (2 + 0.5 * 2 + 2))  # 0.6
+    assert not result.accepted
+    assert pvs_votes(_FixedPVS(), vertices, np.eye(4), threshold=0.6).accepted
+    # Eq. 3.11 as printed: vertices only in unknown space give 1.0 (nothing contradicts the pose)
+    assert pvs_votes(_FixedPVS(), np.full((4, 3), 0.5), np.eye(4)).score == pytest.approx(1.0)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError):
+        pvs_votes(_FixedPVS(), np.zeros((3, 2)), np.eye(4))
+    with pytest.raises(ValueError):
+        pvs_votes(_FixedPVS(), np.zeros((3, 3)), np.full((4, 4), np.nan))
+    empty = pvs_votes(_FixedPVS(), np.zeros((0, 3)), np.eye(4))
+    assert empty.score == 0.0 and not empty.accepted
+
+
+@pytest.fixture(scope="module")
+def scene(registry):
+    """tabletop after the overview scan, integrated into a 10 mm PVS."""
+    from explore.pvs import PVS
+    from explore.simulation import Simulation
+
+    with Simulation("tabletop", registry) as sim:
+        pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
+        eye = np.array([0.0, -0.9, 1.35])
+        pvs.integrate(sim.sensor.acquire(sim, look_at(eye, [0.0, 0.0, 0.65]), np.random.default_rng(0)))
+        yield sim, pvs, eye
+
+
+def test_right_pose_accepted_and_shifted_pose_rejected(scene):
+    sim, pvs, eye = scene
+    for body in sim.objects():
+        vertices = body.mesh.vertices  # world frame: the right pose is the identity
+        right = pvs_votes(pvs, vertices, np.eye(4))
+        toward = eye - vertices.mean(axis=0)
+        shifted = np.eye(4)
+        shifted[:3, 3] = 0.05 * toward / np.linalg.norm(toward)  # 5 cm into observed free space
+        wrong = pvs_votes(pvs, vertices, shifted)
+        assert right.score >= 0.66 and right.accepted, (body.name, right)
+        assert wrong.score < 0.66 and not wrong.accepted, (body.name, wrong)
+        assert wrong.free > right.free
+
+
+def test_plugin(registry, scene):
+    sim, pvs, _ = scene
+    validator = registry.plugins[("pose_validator", "pvs_votes")].create({"threshold": 0.9})
+    duck = next(b for b in sim.objects() if b.name == "duck")
+    result = validator.validate_hypothesis(SimpleNamespace(pose=np.eye(4)), pvs, duck.mesh.vertices)
+    assert result.score == pytest.approx(pvs_votes(pvs, duck.mesh.vertices, np.eye(4)).score)
+    assert result.accepted == (result.score >= 0.9)
+    assert set(result.as_dict()) == {"score", "free", "unknown", "occupied", "accepted"}
+    with pytest.raises(ValueError):
+        registry.plugins[("pose_validator", "pvs_votes")].create({"free_below": 0.8, "occupied_from": 0.7})
