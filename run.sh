@@ -10,7 +10,7 @@ VENV=${EXPLORE_VENV:-.venv}
 PY=${EXPLORE_PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 
-system_packages=(libusb-1.0-0 libgomp1 libgl1 graphviz)
+system_packages=(libusb-1.0-0 libgomp1 libgl1 graphviz chromium)
 missing=()
 for pkg in "${system_packages[@]}"; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")

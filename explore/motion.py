@@ -174,36 +174,48 @@ class BulletCollider:
         self.parts = list(parts)
         self.self_pairs = list(self_pairs)
         self.ignore = set(ignore)
-        self._aabb: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._aabb: dict[int, tuple[tuple, tuple]] = {}
+        # integer indices of the parts (a frozen dataclass hashes slowly in the inner loop)
+        index = {part: i for i, part in enumerate(self.parts)}
+        self._pair_index = [(index.get(a, -1), index.get(b, -1)) for a, b in self.self_pairs]
+        self._ignore_index = {(index[part], body) for part, body in self.ignore if part in index}
 
-    def obstacle_aabbs(self, bodies: Sequence[int]) -> list[tuple[int, np.ndarray, np.ndarray]]:
-        """Cached AABBs of static bodies (obstacles do not move)."""
+    def obstacle_aabbs(self, bodies: Sequence[int]) -> list[tuple[int, tuple, tuple]]:
+        """Cached AABBs (lo, hi tuples) of static bodies (obstacles do not move)."""
         out = []
         for body in bodies:
             if body not in self._aabb:
                 lo, hi = self.p.getAABB(body, physicsClientId=self.client)
-                self._aabb[body] = (np.asarray(lo), np.asarray(hi))
+                self._aabb[body] = (tuple(lo), tuple(hi))
             out.append((body, *self._aabb[body]))
         return out
 
     def collides(self, obstacles: Sequence[int], margin: float = 0.0, self_check: bool = True) -> list[int]:
-        """Obstacle body ids (and -1 for self-collision) within ``margin`` of the robot."""
+        """Obstacle body ids (and -1 for self-collision) within ``margin`` of the robot.
+
+        Plain-Python AABB overlap tests (numpy calls on 3-vectors cost more than the test)
+        prune both the obstacle and the self-collision pairs before ``getClosestPoints``.
+        """
         p, c = self.p, self.client
         hits: list[int] = []
         boxes = self.obstacle_aabbs(obstacles)
-        for part in self.parts:
+        ignore = self._ignore_index
+        part_boxes: list[tuple] = []
+        for i, part in enumerate(self.parts):
             lo, hi = p.getAABB(part.body, part.link, physicsClientId=c)
-            lo, hi = np.asarray(lo) - margin, np.asarray(hi) + margin
+            part_boxes.append((lo, hi))
             for body, blo, bhi in boxes:
-                if body in hits or (part, body) in self.ignore:
+                if body in hits or (ignore and (i, body) in ignore):
                     continue
-                if np.any(lo > bhi) or np.any(hi < blo):
+                if not _overlap(lo, hi, blo, bhi, margin):
                     continue
                 points = p.getClosestPoints(part.body, body, margin, linkIndexA=part.link, physicsClientId=c)
                 if points and min(pt[8] for pt in points) < margin:
                     hits.append(body)
         if self_check:
-            for a, b in self.self_pairs:
+            for (a, b), (ia, ib) in zip(self.self_pairs, self._pair_index, strict=True):
+                if ia >= 0 and ib >= 0 and not _overlap(*part_boxes[ia], *part_boxes[ib], 0.0):
+                    continue  # disjoint boxes cannot penetrate
                 points = p.getClosestPoints(
                     a.body, b.body, 0.0, linkIndexA=a.link, linkIndexB=b.link, physicsClientId=c
                 )
@@ -211,6 +223,15 @@ class BulletCollider:
                     hits.append(-1)
                     break
         return hits
+
+
+def _overlap(lo: Sequence[float], hi: Sequence[float], blo: Sequence[float], bhi: Sequence[float],
+             margin: float) -> bool:
+    """True if box [lo, hi] grown by ``margin`` overlaps box [blo, bhi]."""
+    return not (
+        lo[0] - margin > bhi[0] or lo[1] - margin > bhi[1] or lo[2] - margin > bhi[2]
+        or hi[0] + margin < blo[0] or hi[1] + margin < blo[1] or hi[2] + margin < blo[2]
+    )
 
 
 def self_collision_pairs(
@@ -280,7 +301,7 @@ class MotionProblem:
 
     def is_valid_motion(self, a: Array, b: Array, resolution: float | None = None) -> bool:
         """Straight-line motion from ``a`` to ``b`` checked every ``resolution`` (L2)."""
-        return validate_path(self, np.vstack([a, b]), resolution) is None
+        return path_is_valid(self, np.vstack([a, b]), resolution, margin=0.0)
 
 
 def _interpolate(path: np.ndarray, resolution: float) -> np.ndarray:
@@ -306,6 +327,29 @@ def validate_path(
         if not problem.is_valid(q, margin=margin):
             return index
     return None
+
+
+def path_is_valid(
+    problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
+) -> bool:
+    """Same test as ``validate_path(...) is None`` but in bisection order (van der Corput, as
+    OMPL's DiscreteMotionValidator): an invalid path is usually rejected after a few checks."""
+    dense = _interpolate(path, resolution or problem.resolution)
+    n = len(dense)
+    if n == 0:
+        return True
+    order = [0, n - 1] if n > 1 else [0]
+    seen = set(order)
+    step = n - 1
+    while step > 1:
+        half = step // 2
+        for index in builtins_range(half, n - 1, step):
+            if index not in seen:
+                seen.add(index)
+                order.append(index)
+        step = half
+    order.extend(i for i in builtins_range(n) if i not in seen)
+    return all(problem.is_valid(dense[i], margin=margin) for i in order)
 
 
 def path_length(robot: Robot, path: np.ndarray) -> float:
@@ -375,13 +419,20 @@ def plan(
     seed: int | None = None,
     goal_threshold: float = 1e-6,
     try_direct: bool = False,
+    check_factor: float = 3.0,
 ) -> MotionPlan | None:
     """A collision-free joint path from ``start`` to ``goal`` with an OMPL geometric planner.
 
-    The path is simplified (``ss.simplifySolution``: shortcutting and smoothing, cf. the
-    thesis' RRT-Connect + Berchtold-Glavina smoothing) and only exact solutions are returned.
+    Only exact solutions are returned, and every returned path is re-checked every
+    ``problem.resolution`` (L2, rad) with the clearance margin. Speed (``benchmarks/planners.py``,
+    workcell): the search checks motions every ``check_factor * problem.resolution`` (the
+    dense re-check guards the result; if it fails, the search is repeated at the fine
+    resolution with the time left), and simplification is bounded: ``reduceVertices`` and
+    ``collapseCloseVertices`` (shortcuts between path vertices, cf. the thesis' RRT-Connect +
+    Berchtold-Glavina smoothing) instead of ``ss.simplifySolution``, whose B-spline smoothing
+    and perturbation ran 0.3-0.4 s (1,800-2,300 validity checks) past a 0.1 s budget on an
+    iiwa query whose answer is one straight segment.
     """
-    ob, og, _ = _ompl()
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
     if not problem.is_valid(start) or not problem.is_valid(goal):
         return None
@@ -390,35 +441,65 @@ def plan(
         if direct is not None:
             direct.planner = planner
             return direct
-    seed_ompl(seed)
     t0 = time.perf_counter()
+    factors = [max(1.0, float(check_factor))] + ([1.0] if check_factor > 1.0 else [])
+    for attempt, factor in enumerate(factors):
+        remaining = float(time_limit) - (time.perf_counter() - t0)
+        if remaining <= 0.0:
+            break
+        seed_ompl(None if seed is None else seed + attempt)
+        path = _ompl_search(problem, start, goal, planner, remaining, simplify, range, goal_threshold, factor)
+        if path is None:
+            if attempt == 0 and factor > 1.0 and time.perf_counter() - t0 < float(time_limit):
+                continue  # coarse search gave up early (e.g. an approximate solution); try fine
+            break
+        # OMPL checks motions with its own resolution; make sure every returned segment is valid
+        if validate_path(problem, path, margin=None) is None:
+            elapsed = time.perf_counter() - t0
+            return MotionPlan(path, planner=planner, planning_time=elapsed, length=path_length(problem.robot, path))
+    return None
+
+
+def _ompl_search(
+    problem: MotionProblem,
+    start: Array,
+    goal: Array,
+    planner: str,
+    time_limit: float,
+    simplify: bool,
+    step: float,
+    goal_threshold: float,
+    check_factor: float,
+) -> np.ndarray | None:
+    """One OMPL solve with motions checked every ``check_factor * problem.resolution``."""
+    ob, og, _ = _ompl()
+    n = len(start)
     space = _space(ob, problem.lower, problem.upper)
     ss = og.SimpleSetup(space)
-    ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in builtins_range(len(start))]))
+    ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in builtins_range(n)]))
     si = ss.getSpaceInformation()
-    si.setStateValidityCheckingResolution(problem.resolution / max(space.getMaximumExtent(), 1e-9))
-    cls = planner_class(planner)
-    instance = cls(si)
-    if range > 0 and hasattr(instance, "setRange"):
-        instance.setRange(range)
+    si.setStateValidityCheckingResolution(
+        min(1.0, check_factor * problem.resolution / max(space.getMaximumExtent(), 1e-9))
+    )
+    instance = planner_class(planner)(si)
+    if step > 0 and hasattr(instance, "setRange"):
+        instance.setRange(step)
     ss.setPlanner(instance)
     ss.setStartAndGoalStates(_state(space, start), _state(space, goal), goal_threshold)
     status = ss.solve(float(time_limit))
     if not status or not ss.haveExactSolutionPath():
         return None
-    if simplify:
-        ss.simplifySolution(min(0.1, 0.1 * time_limit))
     solution = ss.getSolutionPath()
-    n = len(start)
+    if simplify and solution.getStateCount() > 2:
+        simplifier = og.PathSimplifier(si)
+        simplifier.reduceVertices(solution)
+        simplifier.collapseCloseVertices(solution)
+        simplifier.reduceVertices(solution)
     path = np.array(
         [[solution.getState(i)[k] for k in builtins_range(n)] for i in builtins_range(solution.getStateCount())]
     )
     path[0], path[-1] = start, goal
-    # OMPL checks motions with its own resolution; make sure every returned segment is valid
-    if validate_path(problem, path, margin=None) is not None:
-        return None
-    elapsed = time.perf_counter() - t0
-    return MotionPlan(path, planner=planner, planning_time=elapsed, length=path_length(problem.robot, path))
+    return path
 
 
 builtins_range = range  # ``plan`` shadows ``range`` with OMPL's parameter name
@@ -428,7 +509,7 @@ def straight_line(problem: MotionProblem, start: Array, goal: Array) -> MotionPl
     """The straight segment in configuration space if it is valid (the free flyer's planner)."""
     t0 = time.perf_counter()
     path = np.vstack([start, goal]).astype(float)
-    if validate_path(problem, path, margin=None) is not None:
+    if not path_is_valid(problem, path, margin=None):
         return None
     return MotionPlan(
         path, planner="straight_line", planning_time=time.perf_counter() - t0, length=path_length(problem.robot, path)

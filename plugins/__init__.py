@@ -19,6 +19,7 @@ BUILTIN_MODULES = (
     "planners",
     "view_generators",
     "utilities",
+    "nbvs_plugins",
     "terminations",
     "strategies",
     "segmenters",

@@ -19,8 +19,10 @@ from explore.typed import Array
 _GEOMETRIC = (
     Param("time_limit", float, 1.0, "s", "planning time limit", low=0.001),
     Param("range", float, 0.0, "rad", "maximum step of tree extension (0 = OMPL default)", low=0.0),
-    Param("simplify", bool, True, "", "shortcut and smooth the path (ss.simplifySolution)"),
+    Param("simplify", bool, True, "", "shortcut the path between its vertices (PathSimplifier.reduceVertices)"),
     Param("try_direct", bool, True, "", "return the straight segment when it is valid, without OMPL"),
+    Param("check_factor", float, 3.0, "", "search checks motions every factor x resolution (result re-checked "
+          "at the resolution)", low=1.0),
 )
 
 
@@ -48,6 +50,7 @@ class GeometricPlanner:
             self.range,
             seed,
             try_direct=self.try_direct,
+            check_factor=getattr(self, "check_factor", 3.0),
         )
 
 
@@ -85,6 +88,7 @@ class OmplByName(GeometricPlanner):
             self.range,
             seed,
             try_direct=self.try_direct,
+            check_factor=getattr(self, "check_factor", 3.0),
         )
 
 

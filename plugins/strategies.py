@@ -1,5 +1,133 @@
-"""Built-in strategie plugins."""
+"""Named NBV strategies: a view generator + a utility + a termination, each with parameters.
+
+Includes the 12 combinations of Kriegel's thesis Table 4.5 ({random, ig, quality,
+ig_quality} x {sphere, bs, bs_hr}) and the 5 methods of the IROS 2012 Table II (B, S, S/IG,
+B/IG, BH/IG). ``custom`` takes the three plugin names as parameters. Every strategy accepts
+``generator_params``, ``utility_params`` and ``termination_params`` that override its
+defaults.
+"""
 
 from __future__ import annotations
 
-PLUGINS: list = []
+from dataclasses import dataclass, field
+from typing import Any
+
+from explore.params import Param
+
+
+@dataclass
+class Strategy:
+    """A resolved strategy: plugin names and parameters of its three parts."""
+
+    name: str
+    generator: str
+    utility: str
+    termination: str
+    generator_params: dict[str, Any] = field(default_factory=dict)
+    utility_params: dict[str, Any] = field(default_factory=dict)
+    termination_params: dict[str, Any] = field(default_factory=dict)
+
+    def build(self, registry: Any) -> tuple[Any, Any, Any]:
+        """Create the generator, utility and termination plugins."""
+        src = f"strategy {self.name}"
+        return (
+            registry.create("view_generator", self.generator, self.generator_params, src, "generator"),
+            registry.create("utility", self.utility, self.utility_params, src, "utility"),
+            registry.create("termination", self.termination, self.termination_params, src, "termination"),
+        )
+
+
+OVERRIDES = (
+    Param("generator_params", dict, {}, "", "overrides of the view generator's parameters"),
+    Param("utility_params", dict, {}, "", "overrides of the utility's parameters"),
+    Param("termination_params", dict, {}, "", "overrides of the termination's parameters"),
+)
+
+
+def make_strategy(name: str, doc: str, generator: str, utility: str, termination: str,
+                  generator_params: dict | None = None, utility_params: dict | None = None,
+                  termination_params: dict | None = None) -> type:
+    """A strategy plugin class with fixed parts and default parameters."""
+
+    def __init__(self: Any, generator_params: dict, utility_params: dict, termination_params: dict) -> None:
+        self.strategy = Strategy(
+            name, generator, utility, termination,
+            {**(defaults[0] or {}), **generator_params},
+            {**(defaults[1] or {}), **utility_params},
+            {**(defaults[2] or {}), **termination_params},
+        )
+
+    defaults = (generator_params, utility_params, termination_params)
+    cls = type(
+        "Strategy_" + name.replace("/", "_"),
+        (),
+        {"kind": "strategy", "name": name, "params": OVERRIDES, "__doc__": doc, "__init__": __init__,
+         "parts": (generator, utility, termination), "defaults": defaults},
+    )
+    return cls
+
+
+class Custom:
+    """Any generator + utility + termination given by name."""
+
+    kind = "strategy"
+    name = "custom"
+    params = (
+        Param("generator", str, "boundary_hole", "", "view generator plugin"),
+        Param("utility", str, "ig_quality", "", "utility plugin"),
+        Param("termination", str, "coverage_target", "", "termination plugin"),
+    ) + OVERRIDES
+
+    def __init__(self, generator: str, utility: str, termination: str, generator_params: dict,
+                 utility_params: dict, termination_params: dict) -> None:
+        self.strategy = Strategy("custom", generator, utility, termination, generator_params, utility_params,
+                                 termination_params)
+
+
+THESIS_SELECTIONS = {
+    "random": ("random", {}),
+    "ig": ("ig_quality", {"omega": 0.0}),
+    "quality": ("ig_quality", {"omega": 1.0}),
+    "ig_quality": ("ig_quality", {"omega": -1.0}),
+}
+THESIS_SEARCHES = {"sphere": "sphere", "bs": "boundary", "bs_hr": "boundary_hole"}
+THESIS_TERMINATION = ("coverage_target", {"coverage": 0.8, "density": 0.2, "n_abort": 30})
+
+TABLE_4_5 = [f"{sel}/{search}" for sel in THESIS_SELECTIONS for search in THESIS_SEARCHES]
+
+
+def _thesis() -> list[type]:
+    out = []
+    for sel, (utility, uparams) in THESIS_SELECTIONS.items():
+        for search, generator in THESIS_SEARCHES.items():
+            name = f"{sel}/{search}"
+            doc = f"Kriegel thesis Table 4.5: {sel} selection over {search} candidates, stop at ĉ_m 80 %, d̄_m 20 %."
+            out.append(make_strategy(name, doc, generator, utility, THESIS_TERMINATION[0], {}, dict(uparams),
+                                     dict(THESIS_TERMINATION[1])))
+    return out
+
+
+IROS_TARGET = {"coverage": 0.9875, "density": 0.0, "measure": "border", "n_abort": 30, "switch_delta": 0.0}
+IROS = [
+    make_strategy("iros/B", "IROS 2012 Table II 'B': boundary search in detection order until none is left.",
+                  "boundary", "fov_order", "no_candidates", {"repair": False}),
+    make_strategy("iros/S",
+                  "IROS 2012 Table II 'S': 121-view sphere, most unknown voxels, stop when unknowns stagnate.",
+                  "sphere", "unknown_count", "stagnation", {"lines": True},
+                  {}, {"measure": "unknown", "window": 2, "delta": 0.01}),
+    make_strategy("iros/S_IG", "IROS 2012 Table II 'S/IG': sphere + information gain, stop at ĉ_m 98.75 %.",
+                  "sphere", "information_gain", "coverage_target", {}, {}, dict(IROS_TARGET)),
+    make_strategy("iros/B_IG", "IROS 2012 Table II 'B/IG': boundary search + information gain, ĉ_m 98.75 %.",
+                  "boundary", "information_gain", "coverage_target", {}, {}, dict(IROS_TARGET)),
+    make_strategy("iros/BH_IG", "IROS 2012 Table II 'BH/IG': boundary search + hole detection + IG, ĉ_m 98.75 %.",
+                  "boundary_hole", "information_gain", "coverage_target", {}, {}, dict(IROS_TARGET)),
+]
+
+EXTRA = [
+    make_strategy("vasquez/du", "Vasquez-Gomez deterministic utility (pos reg sur dist) over random views.",
+                  "random", "area_factor", "unknown_below", {"count": 40}),
+    make_strategy("random/random", "Random views, random choice (the weakest baseline).",
+                  "random", "random", "max_scans"),
+]
+
+PLUGINS: list = _thesis() + IROS + EXTRA + [Custom]

@@ -1,5 +1,141 @@
-"""Built-in termination plugins."""
+"""Built-in termination rules: each ``decide(ctx) -> Decision`` (continue / switch / stop + reason).
+
+They read only the planning context (ĉ_m and d̄_m history, scan count, candidate stack,
+the last selection's diagnostics, unknown-voxel counts), never the ground truth.
+"""
 
 from __future__ import annotations
 
-PLUGINS: list = []
+from typing import Any
+
+from explore.candidates import CONTINUE, STOP, SWITCH, Decision, PlanningContext
+from explore.params import Param
+
+
+class Termination:
+    """Base class: ``decide(ctx) -> Decision``."""
+
+    kind = "termination"
+    name = "termination"
+    params: tuple = ()
+
+    def __init__(self, **values: Any) -> None:
+        for key, value in values.items():
+            setattr(self, key, value)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state of a previous run."""
+
+    def decide(self, ctx: PlanningContext) -> Decision:
+        raise NotImplementedError
+
+
+class MaxScans(Termination):
+    """Stop after a number of scans."""
+
+    name = "max_scans"
+    params = (Param("max_scans", int, 30, "", "scans to take", low=1),)
+
+    def decide(self, ctx: PlanningContext) -> Decision:
+        if ctx.iteration >= self.max_scans:
+            return Decision(STOP, f"{ctx.iteration} scans taken (max {self.max_scans})")
+        return Decision(CONTINUE, "")
+
+
+class CoverageTarget(Termination):
+    """Stop at ĉ_m >= target and d̄_m >= target, else at n_abort scans (thesis Sec. 4.6: 80 % / 20 % / 30)."""
+
+    name = "coverage_target"
+    params = (
+        Param("coverage", float, 0.8, "", "ĉ_m target (thesis simulation 80 %; IROS 98.75 % with 'border')",
+              low=0.0, high=1.0),
+        Param("density", float, 0.2, "", "d̄_m target (thesis 20 %)", low=0.0, high=1.0),
+        Param("n_abort", int, 30, "", "stop after this many scans regardless", low=1),
+        Param("measure", str, "area", "", "ĉ_m from areas with hole fans (Eq. 4.35) or border edges (IROS Eq. 3)",
+              choices=("area", "border")),
+        Param("switch_delta", float, 0.01, "", "advise a mode switch when ĉ_m grows less (Eq. 4.38); 0 = never",
+              low=0.0),
+    )
+
+    def reset(self) -> None:
+        self.switched = False
+
+    def estimate(self, ctx: PlanningContext) -> float:
+        if self.measure == "border":
+            return float(ctx.surface.coverage_border())
+        return float(ctx.coverage_history[-1]) if ctx.coverage_history else float(ctx.surface.coverage_area())
+
+    def decide(self, ctx: PlanningContext) -> Decision:
+        c = self.estimate(ctx)
+        d = float(ctx.density_history[-1]) if ctx.density_history else float(ctx.surface.mean_density())
+        if c >= self.coverage and d >= self.density:
+            return Decision(STOP, f"ĉ_m = {c:.3f} >= {self.coverage} and d̄_m = {d:.3f} >= {self.density}")
+        if ctx.iteration >= self.n_abort:
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})")
+        history = ctx.coverage_history
+        stalled = len(history) >= 2 and history[-1] - history[-2] < self.switch_delta
+        if self.switch_delta > 0 and not self.switched and stalled:
+            self.switched = True
+            return Decision(SWITCH, f"ĉ_m grew by {history[-1] - history[-2]:.4f} < {self.switch_delta}: hole rescan")
+        return Decision(CONTINUE, f"ĉ_m = {c:.3f}, d̄_m = {d:.3f}")
+
+
+class NoCandidates(Termination):
+    """Stop when no candidate is left on the stack (IROS 'B': no boundaries left)."""
+
+    name = "no_candidates"
+    params = (Param("n_abort", int, 30, "", "stop after this many scans regardless", low=1),)
+
+    def decide(self, ctx: PlanningContext) -> Decision:
+        if ctx.available == 0 and ctx.iteration > 0:
+            return Decision(STOP, "no candidate left")
+        if ctx.iteration >= self.n_abort:
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached")
+        return Decision(CONTINUE, "")
+
+
+class UnknownBelow(Termination):
+    """Stop when the best candidate sees fewer unknown voxels than a threshold (Vasquez-Gomez: 30)."""
+
+    name = "unknown_below"
+    params = (
+        Param("threshold", float, 30.0, "", "unknown voxels the selected candidate must see", low=0.0),
+        Param("n_abort", int, 30, "", "stop after this many scans regardless", low=1),
+    )
+
+    def decide(self, ctx: PlanningContext) -> Decision:
+        seen = ctx.best_diagnostics.get("unknown_first", ctx.best_diagnostics.get("unknown"))
+        if seen is not None and seen < self.threshold:
+            return Decision(STOP, f"best candidate sees {seen:.0f} < {self.threshold:.0f} unknown voxels")
+        if ctx.iteration >= self.n_abort:
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached")
+        return Decision(CONTINUE, "")
+
+
+class Stagnation(Termination):
+    """Stop when ĉ_m (or the unknown-voxel count) changed less than delta over a window of scans."""
+
+    name = "stagnation"
+    params = (
+        Param("measure", str, "coverage", "", "what must stop changing", choices=("coverage", "unknown")),
+        Param("window", int, 2, "", "scans over which the change is measured", low=1),
+        Param("delta", float, 0.005, "", "relative change below which the run stagnates", low=0.0),
+        Param("min_scans", int, 3, "", "never stop before this many scans", low=1),
+        Param("n_abort", int, 30, "", "stop after this many scans regardless", low=1),
+    )
+
+    def decide(self, ctx: PlanningContext) -> Decision:
+        if ctx.iteration >= self.n_abort:
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached")
+        history = ctx.coverage_history if self.measure == "coverage" else ctx.unknown_history
+        if ctx.iteration < self.min_scans or len(history) <= self.window:
+            return Decision(CONTINUE, "")
+        old, new = float(history[-1 - self.window]), float(history[-1])
+        change = abs(new - old) / max(abs(old), 1e-9) if self.measure == "unknown" else abs(new - old)
+        if change < self.delta:
+            return Decision(STOP, f"{self.measure} changed by {change:.4f} < {self.delta} over {self.window} scans")
+        return Decision(CONTINUE, "")
+
+
+PLUGINS = [MaxScans, CoverageTarget, NoCandidates, UnknownBelow, Stagnation]

@@ -1,5 +1,580 @@
-"""Built-in view_generator plugins."""
+"""Built-in view generators: sphere, boundary search, hole rescan, boundary + hole, random.
+
+A view generator's ``generate(ctx)`` returns new :class:`~explore.candidates.Candidate`
+objects for the candidate stack, given the :class:`~explore.candidates.PlanningContext`
+(PVS, surface model, sensor, history; never the ground truth). Candidates are scan paths for
+line sensors and single views for area sensors.
+"""
 
 from __future__ import annotations
 
-PLUGINS: list = []
+from typing import Any
+
+import numpy as np
+
+from explore.candidates import (
+    Candidate,
+    PlanningContext,
+    RepairSettings,
+    any_sweep,
+    frame_from,
+    make_target,
+    repair,
+)
+from explore.geometry import fibonacci_sphere
+from explore.params import Param
+from explore.scan import ScanPath
+from explore.typed import Array, Points3
+from explore.visibility import first_blocked
+
+
+class ViewGenerator:
+    """Base class: ``generate(ctx) -> list[Candidate]``; ``reset()`` before a new run."""
+
+    kind = "view_generator"
+    name = "view_generator"
+    params: tuple = ()
+    #: sources whose candidates the stack must never drop as stale (fixed search spaces)
+    persistent = False
+
+    def __init__(self, **values: Any) -> None:
+        for key, value in values.items():
+            setattr(self, key, value)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state of a previous run."""
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        raise NotImplementedError
+
+
+def _standoff(ctx: PlanningContext, value: float) -> float:
+    return value if value > 0 else float(ctx.sensor.optimal_distance)
+
+
+def _fov_width(ctx: PlanningContext, standoff: float) -> float:
+    """Width that one stripe (line sensor) or the image (area sensor) covers at ``standoff``."""
+    dirs = ctx.sensor.local_directions()
+    half = float(np.max(np.abs(dirs[:, 0] / np.maximum(dirs[:, 2], 1e-6))))
+    return 2.0 * standoff * half
+
+
+def _env_blocked(ctx: PlanningContext, positions: Points3, clearance: float = 0.02) -> np.ndarray:
+    blocked = np.zeros(len(positions), dtype=bool)
+    for lo, hi in ctx.environment_boxes:
+        blocked |= np.all((positions > np.asarray(lo) - clearance) & (positions < np.asarray(hi) + clearance), axis=1)
+    return blocked
+
+
+# ---------------------------------------------------------------------------------------
+# sphere
+# ---------------------------------------------------------------------------------------
+class Sphere(ViewGenerator):
+    """Fixed search space around the region: inclination x azimuth grid of scan paths, or N views."""
+
+    name = "sphere"
+    persistent = True
+    params = (
+        Param("n_inclination", int, 9, "", "inclination steps of the path grid (thesis: 9 x 9 = 81 paths)", low=1),
+        Param("n_azimuth", int, 9, "", "azimuth steps of the path grid", low=1),
+        Param("n_views", int, 121, "", "views for area sensors (IROS 2012: 121)", low=1),
+        Param("min_elevation_deg", float, -20.0, "deg", "lowest elevation (the pedestal hides the bottom)"),
+        Param("max_elevation_deg", float, 80.0, "deg", "highest elevation"),
+        Param("radius", float, 0.0, "m", "distance from the region centre; 0 = optimal distance + 1/4 region", low=0.0),
+        Param("path_length", float, 0.3, "m", "scan path length (thesis: ~300 mm, covers the object)", low=0.01),
+        Param("lines", bool, True, "", "paths for line sensors (False: single views on a dome)"),
+    )
+
+    def reset(self) -> None:
+        self._done = False
+
+    def views(self, ctx: PlanningContext) -> list[tuple[Array, Array]]:
+        """(eye, view direction) pairs of the search space."""
+        centre = ctx.region_centre
+        radius = self.radius or float(ctx.sensor.optimal_distance + 0.25 * np.max(ctx.region_max - ctx.region_min))
+        out = []
+        if ctx.sensor.geometry == "line" and self.lines:
+            elev = np.deg2rad(np.linspace(self.min_elevation_deg, self.max_elevation_deg, self.n_inclination))
+            azim = np.linspace(0.0, 2.0 * np.pi, self.n_azimuth, endpoint=False)
+            for i, e in enumerate(elev):
+                for a in azim + (np.pi / self.n_azimuth) * (i % 2):
+                    d = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+                    out.append((centre + radius * d, -d))
+        else:
+            dirs = fibonacci_sphere(2 * self.n_views)
+            low = np.sin(np.deg2rad(self.min_elevation_deg))
+            dirs = dirs[dirs[:, 2] >= low][: self.n_views]
+            out = [(centre + radius * d, -d) for d in dirs]
+        return out
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        if self._done:
+            return []
+        self._done = True
+        out = []
+        speed = getattr(ctx.sensor, "speed", 0.05)
+        for index, (eye, view) in enumerate(self.views(ctx)):
+            pose = frame_from(view, any_sweep(view), eye)
+            if pose is None or _env_blocked(ctx, eye[None])[0]:
+                continue
+            if ctx.sensor.geometry == "line":
+                half = 0.5 * self.path_length * pose[:3, 1]
+                start, end = pose.copy(), pose.copy()
+                start[:3, 3] -= half
+                end[:3, 3] += half
+                target: Any = ScanPath(start, end, speed)
+            else:
+                target = pose
+            out.append(Candidate(target, self.name, {"kind": "sphere", "index": index}, None, ctx.iteration))
+        return out
+
+
+class RandomViews(ViewGenerator):
+    """Random views around the region at the sensor's optimal distance (a baseline)."""
+
+    name = "random"
+    params = (
+        Param("count", int, 20, "", "candidates per iteration", low=1),
+        Param("min_elevation_deg", float, -20.0, "deg", "lowest elevation"),
+        Param("path_length", float, 0.3, "m", "scan path length for line sensors", low=0.01),
+    )
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        centre = ctx.region_centre
+        radius = float(ctx.sensor.optimal_distance + 0.25 * np.max(ctx.region_max - ctx.region_min))
+        low = np.sin(np.deg2rad(self.min_elevation_deg))
+        out = []
+        speed = getattr(ctx.sensor, "speed", 0.05)
+        while len(out) < self.count:
+            d = ctx.rng.normal(size=3)
+            d /= np.linalg.norm(d)
+            if d[2] < low:
+                continue
+            eye = centre + radius * d
+            sweep = ctx.rng.normal(size=3)
+            pose = frame_from(-d, sweep, eye)
+            if pose is None or _env_blocked(ctx, eye[None])[0]:
+                continue
+            target: Any = pose
+            if ctx.sensor.geometry == "line":
+                half = 0.5 * self.path_length * pose[:3, 1]
+                start, end = pose.copy(), pose.copy()
+                start[:3, 3] -= half
+                end[:3, 3] += half
+                target = ScanPath(start, end, speed)
+            out.append(Candidate(target, self.name, {"kind": "random"}, None, ctx.iteration))
+        return out
+
+
+# ---------------------------------------------------------------------------------------
+# boundary search (thesis Sec. 4.2-4.3)
+# ---------------------------------------------------------------------------------------
+def _segments(walk: np.ndarray, edge_dirs: Points3, axes: tuple[Array, Array], alpha_t: float, rho_t: int,
+              b_min: int) -> list[tuple[int, int, int]]:
+    """Algorithm 1 on one border walk: split into straight boundaries.
+
+    ``edge_dirs`` are the unit directions of the walk's edges. The first edge of a boundary
+    picks the sensor axis it is closest to (Table 4.1); later edges count as deviating when
+    their angle to that (signed) axis exceeds ``alpha_t``; ``rho_t`` + 1 deviating edges in a
+    row end the boundary. Returns (first edge, last edge, axis index) of boundaries with at
+    least ``b_min`` edges.
+    """
+    out = []
+    n = len(edge_dirs)
+    cos_t = np.cos(alpha_t)
+    i = 0
+    while i < n:
+        c = [float(np.dot(edge_dirs[i], a)) for a in axes]
+        axis = int(np.argmax(np.abs(c)))
+        s = np.sign(c[axis]) * axes[axis]
+        rho = 0
+        j = i + 1
+        last_good = i
+        while j < n:
+            if float(np.dot(edge_dirs[j], s)) < cos_t:
+                rho += 1
+                if rho > rho_t:
+                    break
+            else:
+                rho = 0
+                last_good = j
+            j += 1
+        if last_good - i + 1 >= b_min:
+            out.append((i, last_good, axis))
+        i = last_good + 1 if last_good > i else i + 1
+    return out
+
+
+class Boundary(ViewGenerator):
+    """Boundary Search: scan paths that extend the latest scan's mesh boundaries (thesis Sec. 4.2-4.3)."""
+
+    name = "boundary"
+    params = (
+        Param("alpha_t_deg", float, 45.0, "deg", "angle threshold alpha_t (Algorithm 1)", low=0.0, high=180.0),
+        Param("rho_t", int, 5, "", "deviating edges in a row that end a boundary (rho_t)", low=0),
+        Param("b_min", int, 15, "", "minimum boundary length in edges", low=2),
+        Param("overlap", float, 0.3, "", "overlap o of the new view with the known mesh (Eq. 4.14) [UNSPEC]",
+              low=0.0, high=0.95),
+        Param("step", float, 0.002, "m", "step Delta p along the extrapolated patch [UNSPEC]", low=1e-4),
+        Param("max_turn_deg", float, 60.0, "deg", "stop extrapolating when the patch normal turns more", low=1.0),
+        Param("region_radius", float, 0.03, "m", "radius of the region grown into the mesh for the patch fit",
+              low=0.005),
+        Param("weight_sigma", float, 0.01, "m", "w_i = exp(-dist to boundary / sigma) (Eq. 4.11 [INTERP])",
+              low=1e-4),
+        Param("planar_eig", float, 0.09, "", "planar if both larger eigenvalues of C_N <= this (Eq. 4.19-4.21)",
+              low=0.0),
+        Param("corner_deg", float, 45.0, "deg", "rotation about the boundary at a sharp corner", low=0.0),
+        Param("standoff", float, 0.0, "m", "sensor distance d_s; 0 = the sensor's optimal distance", low=0.0),
+        Param("floor_margin", float, 0.012, "m", "ignore boundaries this close to the region floor (the support)",
+              low=0.0),
+        Param("whole_mesh_fallback", bool, True, "", "search the whole mesh when the latest scan gives none"),
+        Param("max_candidates", int, 40, "", "keep at most this many per iteration (longest boundaries)", low=1),
+        Param("repair", bool, True, "", "occlusion/collision repair (Algorithm 3)"),
+    )
+
+    def boundaries(self, ctx: PlanningContext, current_only: bool = True) -> list[dict[str, Any]]:
+        """Detected boundaries: vertex indices, type, outward direction (thesis Sec. 4.2.1)."""
+        surface = ctx.surface
+        mesh = surface.mesh
+        if len(mesh.triangles) == 0:
+            return []
+        vertices = mesh.vertices
+        normals = surface.vertex_normals
+        current = surface.current_vertices() if current_only else np.ones(len(vertices), dtype=bool)
+        pose = ctx.last_scan.sensor_poses[len(ctx.last_scan.sensor_poses) // 2] if ctx.last_scan is not None \
+            else np.eye(4)
+        axes = (pose[:3, 1], pose[:3, 0])  # Table 4.1: s = y axis (scan direction), s = x axis (fan)
+        floor = ctx.region_min[2] + self.floor_margin
+        found = []
+        border = {(int(a), int(b)) for a, b in surface.border_edges()}
+        for walk in surface.boundary_loops():
+            closed = len(walk) > 2 and (int(walk[-1]), int(walk[0])) in border
+            if closed:  # start a closed loop at its sharpest turn, so no straight part is split
+                d = np.diff(vertices[np.append(walk, walk[0])], axis=0)
+                d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+                turn = np.einsum("ij,ij->i", d, np.roll(d, 1, axis=0))
+                walk = np.roll(walk, -int(np.argmin(turn)))
+            seq = np.append(walk, walk[0]) if closed else walk
+            # runs of edges inside M_cur and above the floor
+            ok = current[seq[:-1]] & current[seq[1:]] & (vertices[seq[:-1], 2] > floor) & (vertices[seq[1:], 2] > floor)
+            if not ok.any():
+                continue
+            edges = np.diff(vertices[seq], axis=0)
+            lengths = np.linalg.norm(edges, axis=1)
+            dirs = edges / np.maximum(lengths[:, None], 1e-12)
+            run_start = None
+            for e in range(len(ok) + 1):
+                if e < len(ok) and ok[e]:
+                    run_start = e if run_start is None else run_start
+                    continue
+                if run_start is None:
+                    continue
+                run = np.arange(run_start, e)
+                run_start = None
+                for a, b, axis in _segments(walk, dirs[run], axes, np.deg2rad(self.alpha_t_deg), self.rho_t,
+                                            self.b_min):
+                    idx = seq[run[a] : run[b] + 2]
+                    pts = vertices[idx]
+                    n_mean = normals[idx].mean(axis=0)
+                    n_mean /= max(np.linalg.norm(n_mean), 1e-12)
+                    d_b = pts[-1] - pts[0]
+                    if np.linalg.norm(d_b) < 1e-6:
+                        continue
+                    d_b /= np.linalg.norm(d_b)
+                    outward = np.cross(d_b, n_mean)  # surface on the left of the walk: unknown on the right
+                    outward -= np.dot(outward, n_mean) * n_mean
+                    outward /= max(np.linalg.norm(outward), 1e-12)
+                    if current_only and np.dot(n_mean, -pose[:3, 2]) < 0.0:  # faces away from the sensor
+                        continue
+                    if axis == 0:
+                        kind = "left" if np.dot(outward, pose[:3, 0]) < 0 else "right"
+                    else:
+                        kind = "top" if np.dot(outward, pose[:3, 1]) < 0 else "bottom"
+                    found.append({"vertices": idx, "type": kind, "direction": d_b, "outward": outward,
+                                  "normal": n_mean, "length": float(lengths[run[a] : run[b] + 1].sum())})
+        found.sort(key=lambda f: -f["length"])
+        return found
+
+    def _trend(self, ctx: PlanningContext, boundary: dict[str, Any]) -> dict[str, Any] | None:
+        """Quadratic patch z = f(u, v) by weighted least squares (Eq. 4.5-4.11) and the viewpoint (4.12-4.18)."""
+        vertices = ctx.surface.mesh.vertices
+        normals = ctx.surface.vertex_normals
+        idx = boundary["vertices"]
+        c_b = vertices[idx[len(idx) // 2]]  # Eq. 4.4
+        d_b, out, n0 = boundary["direction"], boundary["outward"], boundary["normal"]
+        # local frame: u along the boundary, v towards the unknown, w along the normal
+        v_axis = out
+        w_axis = np.cross(d_b, v_axis)
+        if np.dot(w_axis, n0) < 0:
+            w_axis = -w_axis
+        u_axis = np.cross(v_axis, w_axis)
+        half = 0.5 * boundary["length"]
+        rel = vertices - c_b
+        u, v, w = rel @ u_axis, rel @ v_axis, rel @ w_axis
+        near = (np.abs(u) <= half + 0.005) & (v <= 0.005) & (v >= -self.region_radius)
+        near &= np.abs(w) < self.region_radius
+        near &= normals @ n0 > 0.0
+        if np.count_nonzero(near) < 6:
+            return None
+        bpts = vertices[idx]
+        from scipy.spatial import cKDTree
+
+        dist, _ = cKDTree(bpts).query(vertices[near])
+        weight = np.exp(-dist / self.weight_sigma)
+        uu, vv, ww = u[near], v[near], w[near]
+        design = np.column_stack([uu**2, uu * vv, vv**2, uu, vv, np.ones_like(uu)])
+        sw = np.sqrt(weight)
+        coef, *_ = np.linalg.lstsq(design * sw[:, None], ww * sw, rcond=None)  # SVD-based (Eq. 4.10)
+        a1, a2, a3, a4, a5, a6 = coef
+
+        def patch(vq: float) -> tuple[Array, Array]:
+            z = a3 * vq**2 + a5 * vq + a6
+            n_local = np.array([a4 + a2 * vq, 2 * a3 * vq + a5, -1.0])  # Eq. 4.13 at u = 0
+            point = c_b + vq * v_axis + z * w_axis
+            normal = -(n_local[0] * u_axis + n_local[1] * v_axis + n_local[2] * w_axis)
+            return point, normal / np.linalg.norm(normal)
+
+        standoff = _standoff(ctx, self.standoff)
+        target_v = _fov_width(ctx, standoff) * (0.5 - self.overlap)  # Eq. 4.14: overlap o of the stripe
+        p, n = patch(0.0)
+        n_start = n
+        vq = 0.0
+        while vq + self.step <= target_v:
+            p_next, n_next = patch(vq + self.step)
+            if np.degrees(np.arccos(np.clip(np.dot(n_next, n_start), -1, 1))) > self.max_turn_deg:
+                break
+            vq += self.step
+            p, n = p_next, n_next
+        # planarity of the region (Eq. 4.19-4.21) and the sharp-corner rotation (Fig. 4.7)
+        region_normals = normals[near]
+        centred = region_normals - region_normals.mean(axis=0)
+        eig = np.sort(np.linalg.eigvalsh(centred.T @ centred / len(centred)))
+        planar = bool(eig[1] <= self.planar_eig and eig[2] <= self.planar_eig)
+        at_fov_limit = self._at_fov_limit(ctx, bpts)
+        corner = planar and not at_fov_limit and self.corner_deg > 0
+        if corner:
+            view_normal = np.cos(np.deg2rad(self.corner_deg)) * n0 + np.sin(np.deg2rad(self.corner_deg)) * out
+            n = view_normal / np.linalg.norm(view_normal)
+            p = c_b
+        return {"point": p, "normal": n, "c_b": c_b, "corner": corner, "planar": planar}
+
+    @staticmethod
+    def _at_fov_limit(ctx: PlanningContext, points: Points3) -> bool:
+        """True if the boundary lies on the limiting line of sight of the latest scan."""
+        scan = ctx.last_scan
+        if scan is None:
+            return True
+        poses = scan.sensor_poses
+        mid = poses[len(poses) // 2]
+        local = (points - mid[:3, 3]) @ mid[:3, :3]
+        dirs = ctx.sensor.local_directions()
+        half = float(np.max(np.abs(dirs[:, 0] / np.maximum(dirs[:, 2], 1e-6))))
+        ratio = np.abs(local[:, 0]) / np.maximum(local[:, 2], 1e-6)
+        if np.median(ratio) > 0.85 * half:
+            return True
+        if len(poses) > 1:
+            y0 = (poses[0][:3, 3] - mid[:3, 3]) @ mid[:3, 1]
+            y1 = (poses[-1][:3, 3] - mid[:3, 3]) @ mid[:3, 1]
+            lo, hi = min(y0, y1), max(y0, y1)
+            ys = local[:, 1]
+            if np.median(ys) < lo + 0.01 or np.median(ys) > hi - 0.01:
+                return True
+        return False
+
+    def candidates_for(self, ctx: PlanningContext, boundaries: list[dict[str, Any]]) -> list[Candidate]:
+        out = []
+        standoff = _standoff(ctx, self.standoff)
+        vertices = ctx.surface.mesh.vertices
+        for number, boundary in enumerate(boundaries[: self.max_candidates]):
+            trend = self._trend(ctx, boundary)
+            if trend is None:
+                continue
+            view = -trend["normal"]
+            pose = frame_from(view, boundary["direction"], trend["point"] - standoff * view)  # Eq. 4.15-4.18
+            if pose is None:
+                continue
+            target = make_target(ctx.sensor, pose, vertices, standoff)  # Sec. 4.3.2: across the object extent
+            focus = vertices[boundary["vertices"][:: max(1, len(boundary["vertices"]) // 12)]]
+            info = {"kind": "boundary", "id": number, "type": boundary["type"], "corner": trend["corner"],
+                    "length": boundary["length"]}
+            cand = Candidate(target, self.name, info, focus, ctx.iteration)
+            if self.repair:
+                cand = repair(cand, ctx, trend["point"], standoff, vertices, RepairSettings())
+                if cand is None:
+                    continue
+            out.append(cand)
+        return out
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        found = self.boundaries(ctx, current_only=True)
+        cands = self.candidates_for(ctx, found)
+        if not cands and self.whole_mesh_fallback and (ctx.stack is None or len(ctx.stack) == 0):
+            cands = self.candidates_for(ctx, self.boundaries(ctx, current_only=False))
+        return cands
+
+
+# ---------------------------------------------------------------------------------------
+# hole rescan (thesis Sec. 4.4)
+# ---------------------------------------------------------------------------------------
+class HoleRescan(ViewGenerator):
+    """Hole Rescan: one short scan path over each closed hole, occlusion-free normal (thesis Sec. 4.4)."""
+
+    name = "hole"
+    params = (
+        Param("h_min", int, 5, "", "smallest hole in border edges [UNSPEC]", low=3),
+        Param("h_max", int, 300, "", "largest hole in border edges (excludes the bottom opening) [UNSPEC]", low=3),
+        Param("directions", int, 200, "", "directions sampled for the occlusion-free normal (Alg. 2)", low=8),
+        Param("pick", float, 0.2, "", "lower_bound(front + pick (back - front)) of the free directions",
+              low=0.0, high=1.0),
+        Param("extend", float, 1.1, "", "path ends at c_h -/+ extend * d_h (Eq. 4.22-4.23)", low=0.1),
+        Param("merge_distance", float, 0.02, "m", "merge holes with centres this close ...", low=0.0),
+        Param("merge_angle_deg", float, 30.0, "deg", "... and normals within this angle", low=0.0),
+        Param("floor_margin", float, 0.012, "m", "ignore holes touching the region floor (the support)", low=0.0),
+        Param("standoff", float, 0.0, "m", "sensor distance d_s; 0 = the sensor's optimal distance", low=0.0),
+        Param("min_path", float, 0.03, "m", "shortest scan path", low=0.0),
+        Param("repair", bool, True, "", "occlusion/collision repair (Algorithm 3)"),
+    )
+
+    def reset(self) -> None:
+        self.scanned: list[tuple[Array, Array]] = []  # (centre, normal) of holes already selected
+
+    def remember(self, candidate: Candidate) -> None:
+        """Called when a hole candidate is selected: each real hole is scanned once."""
+        if "centre" in candidate.info:
+            self.scanned.append((np.asarray(candidate.info["centre"]), np.asarray(candidate.info["normal"])))
+
+    def _similar(self, c1: Array, n1: Array, c2: Array, n2: Array) -> bool:
+        return bool(np.linalg.norm(c1 - c2) <= self.merge_distance
+                    and np.dot(n1, n2) >= np.cos(np.deg2rad(self.merge_angle_deg)))
+
+    def free_direction(self, ctx: PlanningContext, centre: Array, normal: Array, standoff: float) -> Array | None:
+        """Algorithm 2: the occlusion-free direction at 20 % between the closest and farthest to n_h."""
+        dirs = fibonacci_sphere(self.directions)
+        start = centre + 1.5 * ctx.grid.resolution * dirs
+        t = first_blocked(ctx.grid, start, dirs, standoff, p_block=0.95)
+        free = ~np.isfinite(t)
+        eyes = centre + standoff * dirs
+        free &= ~_env_blocked(ctx, eyes)
+        free &= eyes[:, 2] > ctx.region_min[2] - 0.02  # objects cannot be viewed from below
+        if not free.any():
+            return None
+        key = np.linalg.norm(normal - dirs[free], axis=1)
+        order = np.argsort(key, kind="stable")
+        front, back = key[order[0]], key[order[-1]]
+        bound = front + self.pick * (back - front)
+        chosen = order[np.searchsorted(key[order], bound)]
+        return dirs[free][chosen]
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        surface = ctx.surface
+        holes = surface.holes(min_edges=self.h_min, max_edges=self.h_max)
+        vertices = surface.mesh.vertices
+        floor = ctx.region_min[2] + self.floor_margin
+        kept = [h for h in holes if vertices[h.loop, 2].min() > floor]
+        # merge holes with similar centre and orientation
+        groups: list[list[Any]] = []
+        for hole in kept:
+            for group in groups:
+                if self._similar(group[0].centre, group[0].normal, hole.centre, hole.normal):
+                    group.append(hole)
+                    break
+            else:
+                groups.append([hole])
+        standoff = _standoff(ctx, self.standoff)
+        out = []
+        for number, group in enumerate(groups):
+            loop_pts = np.vstack([vertices[h.loop] for h in group])
+            centre = loop_pts.mean(axis=0)
+            normal = group[0].normal / np.linalg.norm(group[0].normal)
+            if any(self._similar(centre, normal, c, n) for c, n in self.scanned):
+                continue
+            n_h = self.free_direction(ctx, centre, normal, standoff)
+            if n_h is None:
+                continue
+            far = loop_pts[np.argmax(np.linalg.norm(loop_pts - centre, axis=1))]
+            d_h = far - centre  # hole-radius length [INTERP]
+            d_h -= np.dot(d_h, n_h) * n_h
+            if np.linalg.norm(d_h) < 1e-6:
+                d_h = any_sweep(-n_h) * 0.01
+            half = max(self.extend * np.linalg.norm(d_h), 0.5 * self.min_path)
+            sweep = d_h / np.linalg.norm(d_h)
+            pose = frame_from(-n_h, sweep, centre + standoff * n_h)
+            if pose is None:
+                continue
+            if ctx.sensor.geometry == "line":
+                start, end = pose.copy(), pose.copy()
+                start[:3, 3] = centre - half * pose[:3, 1] + standoff * n_h  # Eq. 4.22
+                end[:3, 3] = centre + half * pose[:3, 1] + standoff * n_h  # Eq. 4.23
+                target: Any = ScanPath(start, end, getattr(ctx.sensor, "speed", 0.05))
+            else:
+                target = pose
+            info = {"kind": "hole", "id": number, "centre": centre.tolist(), "normal": normal.tolist(),
+                    "holes": len(group), "edges": int(sum(h.size for h in group))}
+            cand = Candidate(target, self.name, info, loop_pts[:: max(1, len(loop_pts) // 12)], ctx.iteration)
+            if self.repair:
+                extent = np.vstack([centre - half * pose[:3, 1], centre + half * pose[:3, 1]])
+                cand = repair(cand, ctx, centre, standoff, extent, RepairSettings())
+                if cand is None:
+                    continue
+            out.append(cand)
+        return out
+
+
+class BoundaryHole(ViewGenerator):
+    """Boundary Search, switching once to Hole Rescan when ĉ_m grows by less than 1 % (Eq. 4.38)."""
+
+    name = "boundary_hole"
+    params = Boundary.params + tuple(
+        p for p in HoleRescan.params if p.name not in {b.name for b in Boundary.params}
+    ) + (
+        Param("switch_delta", float, 0.01, "", "switch when ĉ_m^i - ĉ_m^(i-1) < this (Eq. 4.38)", low=0.0),
+        Param("min_scans", int, 3, "", "scans before a switch may happen", low=1),
+        Param("force_after", int, 15, "", "switch at the latest after this many scans (IROS safety limit)", low=1),
+        Param("with_boundaries", bool, True, "",
+              "in hole mode also offer boundary paths of the whole mesh (the open rims the hole finder skips)"),
+    )
+
+    def __init__(self, **values: Any) -> None:
+        names_b = {p.name for p in Boundary.params}
+        names_h = {p.name for p in HoleRescan.params}
+        self.boundary = Boundary(**{k: v for k, v in values.items() if k in names_b})
+        self.hole = HoleRescan(**{k: v for k, v in values.items() if k in names_h})
+        super().__init__(**values)
+
+    def reset(self) -> None:
+        self.boundary.reset()
+        self.hole.reset()
+        self.switched_at: int | None = None
+
+    def should_switch(self, ctx: PlanningContext) -> bool:
+        if ctx.mode == "hole":
+            return True
+        history = ctx.coverage_history
+        if len(history) >= max(2, self.min_scans) and history[-1] - history[-2] < self.switch_delta:
+            return True
+        return ctx.iteration >= self.force_after
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        if self.switched_at is None and self.should_switch(ctx):
+            self.switched_at = ctx.iteration
+            ctx.mode = "hole"
+            if ctx.stack is not None:
+                ctx.stack.clear("boundary")  # the remaining boundary candidates are discarded
+        if self.switched_at is None:
+            return self.boundary.generate(ctx)
+        cands = self.hole.generate(ctx)
+        if ctx.stack is not None:  # re-detected every iteration: replace the old ones
+            ctx.stack.clear("hole")
+            if self.with_boundaries:
+                ctx.stack.clear("boundary")
+        if self.with_boundaries or (not cands and (ctx.stack is None or len(ctx.stack) == 0)):
+            cands = cands + self.boundary.candidates_for(ctx, self.boundary.boundaries(ctx, current_only=False))
+        return cands
+
+    def remember(self, candidate: Candidate) -> None:
+        if candidate.source == "hole":
+            self.hole.remember(candidate)
+
+
+PLUGINS = [Sphere, Boundary, HoleRescan, BoundaryHole, RandomViews]

@@ -1,0 +1,176 @@
+"""``explore compare``: the product of runs over worlds, strategies, planners, robots and seeds.
+
+Every name is checked before the first run starts (one line, exit code 2 when wrong).
+``explore compare --plot-only DIR`` redraws the report from ``DIR/results.csv``.
+"""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from explore.errors import BadInput
+
+
+def _names(text: str | None, option: str, allow_empty: bool = True) -> list[str | None]:
+    """A comma-separated list; absent means [None] (the tree's / world's default)."""
+    if text is None:
+        return [None]
+    items = [t.strip() for t in text.split(",")]
+    if not any(items):
+        raise BadInput(option, None, "empty list")
+    if "" in items:
+        raise BadInput(option, text, "empty name in the list")
+    if len(set(items)) != len(items):
+        raise BadInput(option, text, "a name appears twice")
+    return list(items)
+
+
+def _check_plugins(registry: Any, kind: str, names: list[str | None], option: str) -> None:
+    for name in names:
+        if name is not None:
+            registry.get(kind, name, option)
+
+
+def build_grid(
+    tree: str | None,
+    worlds: str | None,
+    strategies: str | None,
+    planners: str | None,
+    robots: str | None,
+    seeds: int,
+    max_scans: int | None,
+    settings: list[str],
+    timeout: float,
+    plugins: list[str],
+    threads: int,
+) -> tuple[Any, Any]:
+    """Validate every argument against the registry and the search paths; return (grid, registry)."""
+    from explore.compare import Grid, make_registry
+    from explore.run import RunConfig
+    from explore.trees import find_tree, load_tree
+    from explore.world import find_world, load_world_spec
+
+    if not tree:
+        raise BadInput("--tree", None, "missing (a tree name or file, see `explore tree list`)")
+    if worlds is None:
+        raise BadInput("--worlds", None, "missing (comma-separated world names, see `explore worlds list`)")
+    world_names = _names(worlds, "--worlds")
+    if seeds < 1:
+        raise BadInput("--seeds", str(seeds), "needs at least 1 seed")
+    if timeout <= 0:
+        raise BadInput("--timeout", str(timeout), "must be positive")
+    if max_scans is not None and max_scans < 1:
+        raise BadInput("--max-scans", str(max_scans), "must be at least 1")
+    if threads < 1:
+        raise BadInput("--threads", str(threads), "must be at least 1")
+    plugin_specs = []
+    for item in plugins:
+        where, _, attr = item.rpartition(":")
+        plugin_specs.append(f"{Path(where).resolve()}:{attr}" if where.endswith(".py") else item)
+    registry = make_registry(plugin_specs)
+    tree_path = find_tree(tree)
+    load_tree(tree_path, registry)
+    resolved_worlds = []
+    for name in world_names:
+        path = find_world(name)
+        load_world_spec(path)
+        resolved_worlds.append(str(path.resolve()))
+    strategy_names = _names(strategies, "--strategies")
+    planner_names = _names(planners, "--planners")
+    robot_names = _names(robots, "--robots")
+    _check_plugins(registry, "strategy", strategy_names, "--strategies")
+    _check_plugins(registry, "motion_planner", planner_names, "--planners")
+    _check_plugins(registry, "robot", robot_names, "--robots")
+    grid = Grid(
+        tree=str(tree_path.resolve()), worlds=resolved_worlds, strategies=strategy_names, planners=planner_names,
+        robots=robot_names, seeds=list(range(seeds)), max_scans=max_scans,
+        settings=RunConfig.parse_settings(settings), timeout=timeout, plugins=plugin_specs, threads=threads,
+    )
+    return grid, registry
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("compare")
+    def compare_cmd(
+        tree: Annotated[str | None, typer.Option("--tree", help="Tree name or file run by every run.")] = None,
+        worlds: Annotated[str | None, typer.Option("--worlds", help="Comma-separated world names or files.")] = None,
+        strategies: Annotated[
+            str | None, typer.Option("--strategies", help="Comma-separated NBV strategies (default: the tree's).")
+        ] = None,
+        planners: Annotated[
+            str | None, typer.Option("--planners", help="Comma-separated motion planners (default: the tree's).")
+        ] = None,
+        robots: Annotated[
+            str | None, typer.Option("--robots", help="Comma-separated robots (default: each world's).")
+        ] = None,
+        seeds: Annotated[int, typer.Option("--seeds", help="Seeds 0..N-1 for every combination.")] = 1,
+        jobs: Annotated[int, typer.Option("--jobs", "-j", help="Concurrent runs (0: one per core).")] = 0,
+        executor: Annotated[str, typer.Option("--executor", help="Executor plugin: local or ray.")] = "local",
+        ray_address: Annotated[
+            str | None, typer.Option("--ray-address", help="Ray cluster address (default: a local Ray instance).")
+        ] = None,
+        max_scans: Annotated[int | None, typer.Option("--max-scans", help="Scan budget of every run.")] = None,
+        timeout: Annotated[float, typer.Option("--timeout", help="Seconds before a run is ended (timeout).")] = 1800.0,
+        threads: Annotated[int, typer.Option("--threads", help="Numeric threads per run.")] = 1,
+        set_: Annotated[list[str] | None, typer.Option("--set", help="key=value for every run (repeatable).")] = None,
+        plugin: Annotated[
+            list[str] | None, typer.Option("--plugin", help="Extra plugin object FILE.py:OBJ or MODULE:OBJ.")
+        ] = None,
+        out: Annotated[Path | None, typer.Option("--out", "-o", help="Results folder (resumable).")] = None,
+        plot_only: Annotated[
+            Path | None, typer.Option("--plot-only", help="Only redraw the report of an existing results folder.")
+        ] = None,
+    ) -> int:
+        """Run a grid of runs (resumable) and write results.csv, summary.md, plots and report.html."""
+        from explore.compare import RESULTS_FILE, compare, read_results
+        from explore.report import write_report
+
+        from .main import console
+
+        if plot_only is not None:
+            if not (plot_only / RESULTS_FILE).is_file():
+                raise BadInput(str(plot_only), None, f"no {RESULTS_FILE} here (run `explore compare --out DIR` first)")
+            written = write_report(plot_only, read_results(plot_only / RESULTS_FILE))
+            console.print(f"report: {written['report.html']}", highlight=False, soft_wrap=True)
+            return 0
+        grid, registry = build_grid(
+            tree, worlds, strategies, planners, robots, seeds, max_scans, set_ or [], timeout, plugin or [], threads
+        )
+        if out is None:
+            raise BadInput("--out", None, "missing (the results folder)")
+        if out.exists() and not out.is_dir():
+            raise BadInput(str(out), None, "exists and is not a folder")
+        if jobs < 0:
+            raise BadInput("--jobs", str(jobs), "must be 0 (one per core) or more")
+        params: dict[str, Any] = {"jobs": jobs}
+        if executor == "ray":
+            params["address"] = ray_address or ""
+        elif ray_address:
+            raise BadInput("--ray-address", ray_address, "only applies to --executor ray")
+        runner = registry.create("executor", executor, params, "--executor", "executor")
+        previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+        try:
+            rows = compare(grid, out, runner, console=console)
+        except KeyboardInterrupt:
+            console.print(
+                f"interrupted: finished runs are in {out / RESULTS_FILE}; run the same command to resume",
+                soft_wrap=True, highlight=False,
+            )
+            return 130
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+        bad = [r for r in rows if r["status"] not in ("success", "failure")]
+        console.print(
+            f"{len(rows)} runs ({len(bad)} crashed or timed out); results: {out / RESULTS_FILE}; "
+            f"report: {out / 'report.html'}",
+            highlight=False, soft_wrap=True,
+        )
+        return 1 if bad else 0

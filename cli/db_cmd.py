@@ -1,0 +1,104 @@
+"""``explore db list|show|add|remove|export``: the object database from the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from explore.errors import BadInput
+
+DbOption = Annotated[
+    Path | None,
+    typer.Option("--db", help="Database file (default: $EXPLORE_DB or ./objects.db)."),
+]
+
+
+def _open(db: Path | None, create: bool = False):  # -> ObjectDatabase
+    from explore.database import ObjectDatabase, default_path
+
+    return ObjectDatabase.open(db or default_path(), create=create)
+
+
+def register(app: typer.Typer) -> None:
+    sub = typer.Typer(help="The object database (SQLite + a folder of meshes).", no_args_is_help=True)
+
+    @sub.command("list")
+    def list_objects(db: DbOption = None) -> None:
+        """List the objects: provenance, size, descriptors, where they came from."""
+        from .main import console
+
+        with _open(db) as database:
+            table = Table(box=None, header_style="bold")
+            for column in ("name", "provenance", "extent [m]", "triangles", "descriptors", "world", "run"):
+                table.add_column(column)
+            for rec in database.records():
+                table.add_row(
+                    rec.name, rec.provenance, str([round(x, 3) for x in rec.extent]), str(rec.triangles),
+                    ",".join(rec.descriptor_kinds) or "-", rec.world or "-", rec.run or "-",
+                )
+            console.print(table)
+
+    @sub.command("show")
+    def show(name: Annotated[str, typer.Argument(help="Object name.")], db: DbOption = None) -> None:
+        """Print one object's record as JSON."""
+        from .main import console
+
+        with _open(db) as database:
+            console.print_json(json.dumps(database.get(name, load_mesh=False).summary()))
+
+    @sub.command("add")
+    def add(
+        name: Annotated[str, typer.Argument(help="Object name.")],
+        mesh: Annotated[Path, typer.Argument(help="Mesh file (OBJ, PLY, STL) in the object frame.")],
+        scale: Annotated[float, typer.Option("--scale", help="Multiply the vertices (e.g. 0.001 for mm).")] = 1.0,
+        provenance: Annotated[str, typer.Option("--provenance", help="given or modelled.")] = "given",
+        replace: Annotated[bool, typer.Option("--replace", help="Overwrite an object of the same name.")] = False,
+        db: DbOption = None,
+    ) -> None:
+        """Add an object from a mesh file (creates the database if needed)."""
+        import math
+
+        from explore.meshes import TriMesh, read_mesh
+
+        from .main import console
+
+        if not math.isfinite(scale) or scale <= 0:
+            raise BadInput("--scale", None, f"{scale} must be a positive number")
+        if not mesh.is_file():
+            raise BadInput(str(mesh), None, "no such mesh file")
+        try:
+            loaded = read_mesh(mesh)
+        except (OSError, ValueError) as error:
+            raise BadInput(str(mesh), None, f"cannot read the mesh: {error}") from None
+        loaded = TriMesh(loaded.vertices * scale, loaded.triangles)
+        with _open(db, create=True) as database:
+            record = database.add(name, loaded, provenance=provenance, replace=replace)
+            console.print(f"added {record.name} ({record.triangles} triangles) to {database.path}")
+
+    @sub.command("remove")
+    def remove(name: Annotated[str, typer.Argument(help="Object name.")], db: DbOption = None) -> None:
+        """Remove an object with its descriptors, locations and mesh."""
+        from .main import console
+
+        with _open(db) as database:
+            database.remove(name)
+            console.print(f"removed {name}")
+
+    @sub.command("export")
+    def export(
+        name: Annotated[str, typer.Argument(help="Object name.")],
+        out: Annotated[Path, typer.Argument(help="Output mesh (.ply, .obj or .stl).")],
+        db: DbOption = None,
+    ) -> None:
+        """Write an object's mesh to a file."""
+        from .main import console, out_path
+
+        with _open(db) as database:
+            path = database.export(name, out_path(out))
+            console.print(f"wrote {path}")
+
+    app.add_typer(sub, name="db")

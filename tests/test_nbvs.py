@@ -1,0 +1,125 @@
+"""Vasquez-Gomez view/state planning: expected utility (Algorithm 1), the k bound, the pipeline."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from explore.motion import MotionPlan, MotionProblem
+from explore.nbvs import (
+    STAGES,
+    NBVSSession,
+    ObstacleField,
+    StateSamples,
+    expected_utility,
+    rollout_batch,
+    samples_needed,
+)
+from explore.simulation import Simulation
+
+
+@pytest.fixture(scope="module")
+def cluttered(registry):
+    with Simulation("cluttered", registry) as sim:
+        yield sim
+
+
+def _ones(samples: StateSamples) -> np.ndarray:
+    return np.ones(len(samples.configs))
+
+
+def _drive_past_chair(robot, side: float) -> np.ndarray:
+    """The base drives 0.65 m along -x with its flank ``side`` m from chair_1's face (y = 0.025)."""
+    a = robot.q.copy()
+    a[:3] = (1.6, 0.025 - 0.25 - side, math.pi)  # base half width 0.25 m
+    b = a.copy()
+    b[0] = 0.95
+    return np.vstack([a, b])
+
+
+def test_samples_needed_matches_the_paper() -> None:
+    """Eq. 18: alpha 0.01, eta 1/0.997, gamma 0.05 -> k >= 90 (ln 0.01 / ln(1 - 0.05015) = 89.5)."""
+    assert samples_needed(0.01, 1 / 0.997, 0.05) == 90
+    assert samples_needed(0.05, 1.0, 0.1) == math.ceil(math.log(0.05) / math.log(0.9)) == 29
+    assert samples_needed(0.001, 1 / 0.997, 0.05) > samples_needed(0.01, 1 / 0.997, 0.05)
+    assert samples_needed(0.01, 1 / 0.997, 0.2) < 90
+    assert samples_needed(0.01, 2.0, 0.6) == 1  # eta gamma >= 1: one sample always hits
+    with pytest.raises(ValueError):
+        samples_needed(0.01, 1.0, 0.0)
+
+
+def test_batch_rollout_matches_the_robot(cluttered) -> None:
+    robot = cluttered.robot
+    path = _drive_past_chair(robot, 0.3)
+    controls, nominal = robot.controls_from_path(path)
+    batch = rollout_batch(robot, path[0], controls, np.zeros((2, len(controls), 2 + 7)))
+    assert np.allclose(batch[0], nominal) and np.allclose(batch[1], nominal)
+    eps = np.zeros((1, len(controls), 9))
+    eps[0, :, 1] = 0.1  # a constant angular velocity error bends the drive
+    bent = rollout_batch(robot, path[0], controls, eps)[0, -1]
+    assert abs(bent[2] - nominal[-1, 2] - 0.1 * robot.dt * len(controls)) < 1e-9
+
+
+def test_expected_utility_rejects_a_candidate_whose_noisy_reach_hits_an_obstacle(cluttered) -> None:
+    """3.5 cm past chair_1: the nominal motion is valid (DU accepts), noisy rollouts hit the chair."""
+    robot = cluttered.robot
+    path = _drive_past_chair(robot, 0.035)
+    problem = MotionProblem(robot)
+    assert problem.is_valid_motion(path[0], path[1])  # deterministic: pos = 1
+    field = ObstacleField.from_sim(cluttered)
+    plan = MotionPlan(path)
+    # DU (no noise, k = 1 at the nominal final state) accepts the candidate
+    controls, nominal = robot.controls_from_path(path)
+    assert all(field.clearance(robot.link_points(q)).min() >= 0.0 for q in nominal)
+    eu = expected_utility(None, _ones, robot, plan, np.random.default_rng(0), k=100, obstacles=field)
+    assert not eu.feasible and eu.value == 0.0 and eu.collided_sample is not None
+    # the rejection is real: noisy executions in the true world do hit the chair
+    hits = [robot.execute(plan, np.random.default_rng(s), noise=True).collisions for s in range(20)]
+    assert any(any("chair_1" in e.bodies for e in events) for events in hits)
+    # far from the chair (1 m) every rollout is clear and E(G) is the utility's value
+    far = expected_utility(None, _ones, robot, MotionPlan(_drive_past_chair(robot, 1.0)),
+                           np.random.default_rng(0), k=100, obstacles=field)
+    assert far.feasible and far.value == pytest.approx(1.0)
+    assert far.weights.sum() == pytest.approx(1.0) and len(far.utilities) == 100
+
+
+def test_expected_utility_weights_by_probability(cluttered) -> None:
+    robot = cluttered.robot
+    plan = MotionPlan(_drive_past_chair(robot, 1.0))
+    field = ObstacleField.from_sim(cluttered)
+
+    def utility(samples: StateSamples) -> np.ndarray:
+        return samples.configs[:, 1]  # final y: varies with the noise
+
+    eu = expected_utility(None, utility, robot, plan, np.random.default_rng(1), k=50, obstacles=field)
+    assert eu.feasible
+    assert eu.value == pytest.approx(float(np.sum(eu.utilities * eu.weights)))
+    assert np.ptp(eu.utilities) > 0  # the samples really differ
+    again = expected_utility(None, utility, robot, plan, np.random.default_rng(1), k=50, obstacles=field)
+    assert again.value == eu.value  # deterministic for a seed
+
+
+def test_filter_pipeline_counts_are_monotone(registry) -> None:
+    with Simulation("cluttered", registry) as sim:
+        session = NBVSSession(sim, registry, expected=True, k=10, n_samples=20000, seed=0, top=5)
+        session.initial()
+        states = session.score(session.plan(session.filter(session.sample())))
+        counts = [session.stages[name] for name in STAGES]
+        assert counts[0] == 20000 and counts[1] > 0
+        assert all(a >= b for a, b in zip(counts[:-1], counts[1:], strict=True)), counts
+        assert len(states) == session.stages["planned"] <= 5
+        for state in states:
+            assert state.plan is not None and state.plan.controls is not None
+            assert state.reg == 1.0 and state.occ / (state.occ + state.unk) > 0.5  # Eq. 5, h = 0.5
+
+
+def test_two_view_nbvs_run_increases_coverage(registry) -> None:
+    with Simulation("cluttered", registry) as sim:
+        session = NBVSSession(sim, registry, expected=True, k=20, n_samples=20000, seed=0, max_views=2, top=8)
+        summary = session.run()
+        coverage = summary["coverage"]
+        assert summary["views"] == 3, summary["reason"]  # the initial scan + 2 planned views
+        assert coverage[-1] > coverage[0] > 0.0
+        assert summary["collisions"] == 0

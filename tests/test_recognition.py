@@ -1,0 +1,184 @@
+"""Recognition on the tabletop overview scan: PPF, FPFH + RANSAC, VFH mean distance."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from explore.database import ObjectDatabase
+from explore.geometry import look_at
+from explore.recognition import (
+    Hypothesis,
+    Model,
+    PPFRecognizer,
+    pose_error,
+    render_and_compare,
+    vfh_signature,
+)
+
+TOUCHING_WORLD = """
+name: touching
+environment:
+  - name: table
+    source: table/table.urdf
+    position: [0.0, 0.0, 0.3125]
+objects:
+  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.18], on_top_of: table,
+     known: true}
+  - {name: block, box: [0.05, 0.07, 0.06], position: [0.127, -0.18], on_top_of: table}
+region:
+  min: [-0.45, -0.32, 0.625]
+  max: [0.45, 0.32, 0.90]
+robot:
+  plugin: free_flyer
+sensor:
+  plugin: depth_camera
+  params: {width: 320, height: 240, min_range: 0.3, max_range: 2.0}
+"""
+
+
+@pytest.fixture(scope="module")
+def scene(registry, tmp_path_factory):
+    """Tabletop overview scan, its clusters, and a database with all six objects (ground truth meshes)."""
+    from explore.simulation import Simulation
+
+    with Simulation("tabletop", registry) as sim:
+        ov = sim.spec.overview
+        scan = sim.sensor.acquire(sim, look_at(ov[:3], ov[3:]), np.random.default_rng(0))
+        segmentation = registry.create("segmenter", "plane_clusters", {"scale": "table"}).segment(scan)
+        with ObjectDatabase.open(tmp_path_factory.mktemp("db") / "objects.db") as db:
+            truth = db.seed_from_world(sim, only_known=False)
+            models = db.models()
+    clusters = {}
+    for cluster in segmentation.clusters:
+        name = min(truth, key=lambda n: np.linalg.norm(cluster.centroid - truth[n][:3, 3]))
+        clusters[name] = cluster
+    assert len(clusters) == 6
+    return scan, clusters, models, truth
+
+
+def _check_top(hypotheses: list[Hypothesis], truth: dict, name: str) -> tuple[float, float]:
+    assert hypotheses, "no hypothesis"
+    top = hypotheses[0]
+    assert top.model == name, [(h.model, round(h.quality, 3)) for h in hypotheses]
+    t_err, r_err = pose_error(top.pose, truth[name])
+    assert t_err < 0.005 and r_err < 2.0, (t_err, r_err)
+    wrong = [h.quality for h in hypotheses if h.model != name]
+    assert all(q < top.quality for q in wrong)
+    return t_err, r_err
+
+
+@pytest.mark.parametrize("method", ["ppf", "fpfh_ransac"])
+def test_local_recognisers_recover_duck_pose(registry, scene, method):
+    scan, clusters, models, truth = scene
+    recognizer = registry.create("recognizer", method)
+    recognizer.recognize(clusters["duck"], models, scan)  # builds the model tables
+    started = time.perf_counter()
+    hypotheses = recognizer.recognize(clusters["duck"], models, scan)
+    elapsed = time.perf_counter() - started
+    _check_top(hypotheses, truth, "duck")
+    assert hypotheses[0].diagnostics["q_h"] > 0.9
+    # the best wrong model explains the cluster far worse (Eq. 3.10)
+    best_wrong = max(h.quality for h in hypotheses if h.model != "duck")
+    assert best_wrong < 0.5
+    assert elapsed < 2.0  # six models; ~0.3-0.7 s measured
+
+
+def test_ppf_ranks_right_model_on_most_clusters(scene):
+    scan, clusters, models, truth = scene
+    recognizer = PPFRecognizer()
+    right = 0
+    for name, cluster in clusters.items():
+        hypotheses = recognizer.recognize(cluster, models, scan)
+        right += hypotheses[0].model == name
+    assert right == 6
+
+
+def test_wrong_model_scores_lower(scene):
+    scan, clusters, models, truth = scene
+    by_name = {m.name: m for m in models}
+    cluster = clusters["duck"]
+    right = render_and_compare(by_name["duck"].mesh, truth["duck"], cluster, {0: scan})
+    assert right.quality > 0.9 and right.matched <= min(right.rendered, right.cluster)
+    for other in ("mug", "teddy", "bunny"):
+        wrong = render_and_compare(by_name[other].mesh, truth["duck"], cluster, {0: scan})
+        assert wrong.quality < 0.5 * right.quality, other
+    shifted = truth["duck"].copy()
+    shifted[0, 3] += 0.03
+    assert render_and_compare(by_name["duck"].mesh, shifted, cluster, {0: scan}).quality < 0.5 * right.quality
+
+
+def test_vfh_mean_distance_recognises_among_several(registry, scene):
+    scan, clusters, models, truth = scene
+    recognizer = registry.create("recognizer", "vfh_mean_distance")
+    results = {name: recognizer.recognize(cluster, models, scan) for name, cluster in clusters.items()}
+    correct = {name for name, hyps in results.items() if hyps and hyps[0].model == name}
+    assert {"duck", "teddy", "bunny"} <= correct
+    assert len(correct) >= 4  # measured 5 of 6 (the box-like sorter is confused with the teddy)
+    duck = results["duck"][0]
+    assert duck.diagnostics["mean_distance"] < recognizer.gamma
+    t_err, r_err = pose_error(duck.pose, truth["duck"])
+    assert t_err < 0.005 and r_err < 2.0
+    # an impossible threshold rejects everything: the cluster is unknown
+    strict = registry.create("recognizer", "vfh_mean_distance", {"gamma": 1.0})
+    assert strict.recognize(clusters["duck"], models, scan) == []
+
+
+def test_vfh_signature_shape_and_normalisation():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(500, 3)) * [0.05, 0.05, 0.01]
+    normals = np.tile([0.0, 0.0, 1.0], (500, 1)) + rng.normal(0, 0.1, (500, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    signature = vfh_signature(points, normals, np.array([0.0, 0.0, 1.0]))
+    assert signature.shape == (308,)
+    assert abs(signature[180:].sum() - 100.0) < 1e-6  # viewpoint component sums to 100
+    for k in range(4):
+        assert 99.0 < signature[45 * k : 45 * (k + 1)].sum() <= 100.0 * 500 / 499 + 1e-6
+
+
+def test_stored_descriptors_are_reused(scene):
+    scan, clusters, models, truth = scene
+    duck = next(m for m in models if m.name == "duck")
+    first = PPFRecognizer()
+    array, params = first.describe(duck)
+    stored = Model("duck", duck.mesh, {"ppf": (array, params)})
+    second = PPFRecognizer()
+    table = second.table(stored)
+    assert np.allclose(table.cloud.points, first.table(duck).cloud.points)
+    hypotheses = second.recognize(clusters["duck"], [stored], scan)
+    assert pose_error(hypotheses[0].pose, truth["duck"])[0] < 0.005
+
+
+def test_duck_touching_a_block(registry, tmp_path):
+    """Bad input: an object touching another gives one cluster; PPF still finds the duck."""
+    from explore.database import object_frame
+    from explore.segmentation import PlaneClusterSegmenter
+    from explore.simulation import Simulation
+
+    path = tmp_path / "touching.yaml"
+    path.write_text(TOUCHING_WORLD)
+    with Simulation(str(path), registry) as sim:
+        scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
+        duck = next(b for b in sim.objects() if b.name == "duck")
+        truth, mesh = object_frame(duck)
+    segmentation = PlaneClusterSegmenter(cluster_tolerance=0.02, min_cluster_size=30).segment(scan)
+    assert len(segmentation.clusters) == 1
+    hypotheses = PPFRecognizer().recognize(segmentation.clusters[0], [Model("duck", mesh)], scan)
+    t_err, r_err = pose_error(hypotheses[0].pose, truth)
+    assert t_err < 0.005 and r_err < 2.0
+    # the block's points are unexplained: q_h drops below the isolated duck's > 0.9
+    assert 0.1 < hypotheses[0].quality < 0.9
+
+
+def test_empty_cluster_and_no_models(scene):
+    from explore.segmentation import Cluster
+
+    scan, clusters, models, truth = scene
+    empty = Cluster(0, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    from explore.recognition import FPFHRansacRecognizer, VFHRecognizer
+
+    for recognizer in (PPFRecognizer(), FPFHRansacRecognizer(), VFHRecognizer()):
+        assert recognizer.recognize(empty, models, scan) == []
+        assert recognizer.recognize(clusters["duck"], [], scan) == []

@@ -1,0 +1,179 @@
+"""Segmentation: support plane, clusters vs ground truth, views, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from explore.geometry import look_at
+from explore.segmentation import Cloud, Cluster, euclidean_clusters, merge_clusters, ransac_iterations
+
+TABLE_TOP = 0.625  # m, pybullet_data table.urdf at z = 0.3125 (see worlds/tabletop.yaml)
+MIN_HEIGHT = 0.01
+
+
+@pytest.fixture(scope="module")
+def tabletop(registry):
+    from explore.simulation import Simulation
+
+    with Simulation("tabletop", registry) as sim:
+        yield sim
+
+
+@pytest.fixture(scope="module")
+def overview(tabletop):
+    ov = tabletop.spec.overview
+    return tabletop.sensor.acquire(tabletop, look_at(ov[:3], ov[3:]), np.random.default_rng(0))
+
+
+@pytest.fixture(scope="module")
+def segmenter(registry):
+    return registry.create("segmenter", "plane_clusters", {"scale": "table"})
+
+
+@pytest.fixture(scope="module")
+def segmentation(segmenter, overview):
+    return segmenter.segment(overview)
+
+
+def visible_objects(sim, scan, min_points: int) -> dict[str, np.ndarray]:
+    """Ground-truth visible surface points (above the object cut) of each object in ``scan``."""
+    t_hit, index, _ = sim.raycaster.cast(scan.origins, scan.directions)
+    hit = scan.hits & (index >= 0)
+    points = scan.origins + scan.directions * t_hit[:, None]
+    out = {}
+    for i, body in enumerate(sim.bodies):
+        if not body.is_object:
+            continue
+        mask = hit & (index == i) & (points[:, 2] > TABLE_TOP + MIN_HEIGHT)
+        if mask.sum() >= min_points:
+            out[body.name] = points[mask]
+    return out
+
+
+def test_ransac_iterations_formula():
+    # Görner: p = 0.99, w = 1/3 gives about 122 (he used 125)
+    assert ransac_iterations(0.99, 1.0 / 3.0) == math.ceil(math.log(0.01) / math.log(1 - 1 / 27))
+    assert 120 <= ransac_iterations(0.99, 1.0 / 3.0) <= 125
+    assert ransac_iterations(0.99, 1.0) == 1
+
+
+def test_table_plane_normal_and_height(segmentation):
+    table = segmentation.table
+    assert table is not None
+    tilt = math.degrees(math.acos(float(table.normal @ np.array([0.0, 0.0, 1.0]))))
+    assert tilt < 2.0
+    assert abs(table.height - TABLE_TOP) < 0.005
+    # the hull covers the visible table top (1.5 m x 1.0 m) at least in part, and its centre is inside
+    assert table.inside(table.world_T_table[:3, 3][None]).all()
+    assert len(table.hull) >= 4
+
+
+def test_clusters_match_visible_objects(tabletop, overview, segmenter, segmentation):
+    visible = visible_objects(tabletop, overview, segmenter.min_cluster_size)
+    assert len(visible) == 6
+    assert len(segmentation.clusters) == len(visible)
+    matched = set()
+    for cluster in segmentation.clusters:
+        distances = {name: np.linalg.norm(cluster.centroid - pts.mean(axis=0)) for name, pts in visible.items()}
+        name = min(distances, key=distances.get)
+        assert distances[name] < 0.03, (name, distances[name])
+        matched.add(name)
+        lo, hi = cluster.aabb
+        assert np.all(lo <= cluster.centroid) and np.all(cluster.centroid <= hi)
+        pose, extent = cluster.obb
+        assert abs(pose[2, 2] - 1.0) < 1e-2 and np.all(extent > 0)
+        assert cluster.view_ids == (0,)
+        # normals point towards the sensor
+        assert np.mean(np.einsum("ij,ij->i", cluster.normals, overview.origins[0] - cluster.points) > 0) > 0.99
+    assert matched == set(visible)
+
+
+def test_two_views_fused_and_merged(tabletop, overview, segmenter):
+    other = tabletop.sensor.acquire(tabletop, look_at([0.0, 0.9, 1.35], [0.0, 0.0, 0.65]), np.random.default_rng(1))
+    fused = segmenter.segment([overview, other])
+    assert len(fused.clusters) == 6
+    assert all(c.view_ids == (0, 1) for c in fused.clusters)
+    per_view = segmenter.segment([other], view_ids=[1]).clusters + segmenter.segment(overview).clusters
+    merged = merge_clusters(per_view, segmenter.cluster_tolerance)
+    assert len(per_view) == 12 and len(merged) == 6
+    assert sorted(c.view_ids for c in merged) == [(0, 1)] * 6
+
+
+def test_empty_scene(tabletop, segmenter):
+    scan = tabletop.sensor.acquire(tabletop, look_at([0.0, 0.0, 2.0], [0.0, 0.0, 3.0]), np.random.default_rng(0))
+    assert not scan.hits.any()
+    result = segmenter.segment(scan)
+    assert result.table is None and result.clusters == []
+    assert segmenter.segment([]).clusters == []
+
+
+def test_table_without_objects(segmenter):
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-0.5, 0.5, size=(5000, 2))
+    points = np.column_stack([xy, np.full(5000, 0.7) + rng.normal(0, 0.001, 5000)])
+    cloud = Cloud(points, np.tile([0.0, -1.0, 1.5], (5000, 1)), np.zeros(5000, np.int64), np.arange(5000))
+    result = segmenter.segment(cloud)
+    assert result.table is not None and abs(result.table.height - 0.7) < 0.002
+    assert result.clusters == []
+
+
+def test_euclidean_clusters_separate_and_drop_small():
+    rng = np.random.default_rng(0)
+    a = rng.normal([0, 0, 0], 0.005, (200, 3))
+    b = rng.normal([0.2, 0, 0], 0.005, (100, 3))
+    c = rng.normal([0.5, 0, 0], 0.005, (5, 3))
+    labels = euclidean_clusters(np.vstack([a, b, c]), 0.02, min_size=20)
+    assert set(labels[:200]) == {0} and set(labels[200:300]) == {1} and set(labels[300:]) == {-1}
+
+
+def test_touching_objects_form_one_cluster(touching_world):
+    sim, scan, segmentation = touching_world
+    assert len(segmentation.clusters) == 1
+    cluster: Cluster = segmentation.clusters[0]
+    lo, hi = cluster.aabb
+    for body in sim.objects():
+        center = 0.5 * sum(body.mesh.bounds)
+        assert np.all(center[:2] >= lo[:2] - 0.01) and np.all(center[:2] <= hi[:2] + 0.01)
+
+
+TOUCHING_WORLD = """
+name: touching
+environment:
+  - name: table
+    source: table/table.urdf
+    position: [0.0, 0.0, 0.3125]
+objects:
+  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.18], on_top_of: table,
+     known: true}
+  - {name: block, box: [0.05, 0.07, 0.06], position: [0.127, -0.18], on_top_of: table}
+region:
+  min: [-0.45, -0.32, 0.625]
+  max: [0.45, 0.32, 0.90]
+robot:
+  plugin: free_flyer
+sensor:
+  plugin: depth_camera
+  params: {width: 320, height: 240, min_range: 0.3, max_range: 2.0}
+"""
+
+
+def make_touching_world(registry, folder):
+    """A duck with a block pressed against its side; overview scan and segmentation."""
+    from explore.simulation import Simulation
+
+    path = folder / "touching.yaml"
+    path.write_text(TOUCHING_WORLD)
+    sim = Simulation(str(path), registry)
+    scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
+    segmenter = registry.create("segmenter", "plane_clusters", {"scale": "table"})
+    return sim, scan, segmenter.segment(scan)
+
+
+@pytest.fixture(scope="module")
+def touching_world(registry, tmp_path_factory):
+    sim, scan, segmentation = make_touching_world(registry, tmp_path_factory.mktemp("touching"))
+    yield sim, scan, segmentation
+    sim.close()
