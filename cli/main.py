@@ -57,6 +57,8 @@ def _register_subcommands() -> None:
                 raise
             continue
         module.register(app)
+        if hasattr(module, "register_demo"):
+            module.register_demo(app)
 
 
 _register_subcommands()

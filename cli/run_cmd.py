@@ -108,3 +108,21 @@ def register(app: typer.Typer) -> None:
         console.print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
         console.print(f"results: {result.out_dir}")
         return 0 if result.status == "success" else 1
+
+
+def register_demo(app: typer.Typer) -> None:
+    @app.command("demo")
+    def demo(
+        max_scans: Annotated[int, typer.Option("--max-scans", min=1, help="Scan budget.")] = 10,
+        seed: Annotated[int, typer.Option("--seed")] = 0,
+    ) -> int:
+        """The main job: model the bunny on its pedestal with Kriegel's NBS loop (< 3 min)."""
+        from datetime import datetime
+
+        out = Path("runs") / f"{datetime.now():%Y%m%d-%H%M%S}-demo-model_object-bunny_pedestal"
+        run_fn = app.registered_commands
+        command = next(c for c in run_fn if c.name == "run").callback
+        return command(
+            tree="model_object", world="bunny_pedestal", strategy=None, planner=None, robot=None, sensor=None,
+            seed=seed, max_scans=max_scans, set_=None, out=out, rerun=None, quiet=False,
+        )

@@ -44,8 +44,10 @@ class StartModelling(ExploreBehaviour):
             max_scans=config.max_scans or self.p["max_scans"],
             planner=config.planner,
         )
-        ctx.state["modelling"] = ModellingOutputs(session, strategy_name)
-        self.write("modelling", session)
+        adapter = TreeModelling(session, strategy_name)
+        ctx.state["modelling"] = adapter
+        session = adapter
+        self.write("modelling", adapter)
         self.write("target", session.initial_target())
         self.write("done", False)
         self.write("reason", "")
@@ -66,7 +68,7 @@ class AcquireScan(ExploreBehaviour):
         scan = session.acquire(self.read("target"))
         self.write("scan", scan)
         hits = int(scan.hits.sum())
-        self.context.trace("scan", index=len(session.history), beams=len(scan), returns=hits)
+        self.context.trace("scan", index=session.n_scans + 1, beams=len(scan), returns=hits)
         return success(f"{hits} returns")
 
 
@@ -80,7 +82,7 @@ class IntegrateScan(ExploreBehaviour):
     def work(self) -> Outcome:
         session = self.read("modelling")
         stats = session.integrate(self.read("scan"))
-        record = session.history[-1] if session.history else None
+        record = session.session.records[-1] if session.session.records else None
         line = session_status_line(session)
         self.context.status_line = line
         self.context.trace("integrated", **({} if record is None else _record_fields(record)), stats=stats)
@@ -205,18 +207,136 @@ def _record_fields(record: Any) -> dict[str, Any]:
     return {k: v for k, v in fields.items() if isinstance(v, int | float | str | bool | np.floating | np.integer)}
 
 
-class ModellingOutputs:
-    """Adapter that gives the run directory what a modelling session produced."""
+class TreeModelling:
+    """The modelling session driven step by step by a tree (records what ``step()`` records)."""
 
     def __init__(self, session: Any, strategy: str) -> None:
         self.session = session
         self.strategy = strategy
+        self._pending: dict[str, Any] = {"source": "initial", "info": {}, "score": float("nan")}
+        self._selection_s = 0.0
+        self._candidates = 0
+        self._decision = ("continue", "")
+        self._path_length = 0.0
+
+    @property
+    def n_scans(self) -> int:
+        return self.session.n_scans
+
+    def initial_target(self) -> Any:
+        return self.session.initial_target()
+
+    def acquire(self, target: Any) -> Any:
+        import time
+
+        self._t0 = time.perf_counter()
+        scan, scan_length, travel = self.session.acquire(target)
+        self._scan_length, self._travel = scan_length, travel
+        return scan
+
+    def integrate(self, scan: Any) -> dict[str, Any]:
+        import time
+
+        from explore.modelling import ScanRecord
+
+        out = self.session.integrate(scan)
+        s = self.session
+        s.records.append(
+            ScanRecord(
+                index=s.n_scans, source=self._pending["source"], info=dict(self._pending["info"]),
+                scan_length_m=self._scan_length, travel_m=self._travel, selection_s=self._selection_s,
+                candidates=self._candidates, coverage_estimate=s.ctx.coverage_history[-1],
+                coverage_border=float(s.surface.coverage_border()), density=s.ctx.density_history[-1],
+                unknown_voxels=s.ctx.unknown_history[-1], decision=self._decision[0], reason=self._decision[1],
+                score=self._pending["score"], step_s=time.perf_counter() - getattr(self, "_t0", time.perf_counter()),
+            )
+        )
+        return {"integrate_s": out.get("integrate_s", 0.0)}
+
+    def generate(self) -> int:
+        count = self.session.generate()
+        self._candidates = len(self.session.stack)
+        return count
+
+    def select(self) -> Any:
+        candidate = self.session.select()
+        self._selection_s = self.session.selection_times[-1] if candidate is not None else 0.0
+        if candidate is not None:
+            self._pending = {"source": candidate.source, "info": candidate.info, "score": candidate.score}
+        return candidate
+
+    def terminate(self) -> Any:
+        decision = self.session.terminate()
+        self._decision = (decision.action, decision.reason)
+        if decision.stop:
+            self.session.status, self.session.reason = "stopped", decision.reason
+        return decision
+
+    def plan(self, candidate: Any) -> Any:
+        """Free flyer: a straight line to the candidate's start (others: reachability by IK)."""
+        from explore.scan import ScanPath
+
+        start = candidate.target.start if isinstance(candidate.target, ScanPath) else candidate.target
+        robot = self.session.robot
+        if robot is not None and robot.name != "free_flyer" and robot.ik(start) is None:
+            return None
+        here = self.session.ctx.sensor_pose
+        length = 0.0 if here is None else float(np.linalg.norm(start[:3, 3] - here[:3, 3]))
+        return _Plan(length)
+
+    def execute(self, plan: Any, candidate: Any) -> Any:
+        return candidate.target
 
     def live_stats(self) -> dict[str, Any]:
-        return self.session.live_stats() if hasattr(self.session, "live_stats") else {}
+        s = self.session
+        stats: dict[str, Any] = {"strategy": self.strategy, "scans": s.n_scans}
+        if s.records:
+            stats["ĉ_m"] = float(s.records[-1].coverage_estimate)
+            stats["candidates"] = int(self._candidates)
+        return stats
 
     def run_outputs(self, out_dir: Any) -> dict[str, Any]:
-        return self.session.write_outputs(out_dir)
+        """Meshes, PVS, pictures and the modelling metrics for metrics.json."""
+        from pathlib import Path
+
+        from explore.pictures import save_curves_png
+
+        out_dir = Path(out_dir)
+        s = self.session
+        metrics = s.metrics()
+        s.surface.save_ply(out_dir / "model.ply")
+        s.surface.save_png(out_dir / "model.png", f"{s.sim.spec.name}: {s.n_scans} scans")
+        s.pvs.save(out_dir / "pvs.npz")
+        coverage = list(metrics.get("coverage") or [])
+        estimate = list(metrics.get("coverage_estimate") or [])
+        x = np.arange(1, len(estimate) + 1)
+        curves = {"ĉ_m (estimate)": (x, np.asarray(estimate))}
+        if coverage:
+            curves["c_a (ground truth)"] = (x[: len(coverage)], np.asarray(coverage))
+        save_curves_png(curves, out_dir / "coverage.png", "scans", "coverage", self.strategy)
+        selection = list(metrics.get("selection_s") or [])
+        return {
+            "strategy": self.strategy,
+            "scans": s.n_scans,
+            "coverage": coverage[-1] if coverage else None,
+            "coverage_per_scan": coverage,
+            "coverage_estimate": estimate[-1] if estimate else None,
+            "coverage_estimate_per_scan": estimate,
+            "density_per_scan": metrics.get("density"),
+            "path_length_m": metrics.get("travel_m"),
+            "scan_path_m": metrics.get("scan_path_m"),
+            "selection_s_mean": float(np.mean(selection)) if selection else None,
+            "selection_s_per_scan": selection,
+            "n_s": metrics.get("n_s"),
+            "stop_reason": metrics.get("stop_reason"),
+            "objects": [{"name": b.name, "result": "modelled", "coverage": coverage[-1] if coverage else None}
+                        for b in s.sim.objects()],
+        }
+
+
+class _Plan:
+    def __init__(self, length: float) -> None:
+        self.length = length
 
 
 PLUGINS = [
