@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same metrics).")] = 0,
         max_scans: Annotated[int | None, typer.Option("--max-scans", min=1, help="Stop after this many scans.")] = None,
         set_: Annotated[list[str] | None, typer.Option("--set", help="key=value override (repeatable).")] = None,
-        out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/<time>-...).")] = None,
+        out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/...).")] = None,
         rerun: Annotated[Path | None, typer.Option("--rerun", help="Also log to a Rerun .rrd file.")] = None,
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view.")] = False,
     ) -> int:
