@@ -42,9 +42,9 @@ def measure(repeats: int) -> list[dict]:
             target = target_for(sensor, np.array(eye), np.array(at), 0.3)
             rng = np.random.default_rng(0)
             scan = sensor.acquire(sim, target, rng)
-            ours = _best(lambda: sensor.acquire(sim, target, rng), repeats)
+            ours = _best(lambda s=sensor, t=target, r=rng: s.acquire(sim, t, r), repeats)
             origins, directions, _ = sensor.beams(target)
-            bare = _best(lambda: sim.raycaster.cast(origins, directions), repeats)
+            bare = _best(lambda o=origins, d=directions: sim.raycaster.cast(o, d), repeats)
             rows.append(
                 {
                     "world": world,

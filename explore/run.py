@@ -196,7 +196,8 @@ def execute(
                 if previous.get(id(node)) != status:
                     previous[id(node)] = status
                     if node is not root or status != "RUNNING":
-                        context.trace("status", tick=ticks, node=node.name, status=status, message=node.feedback_message)
+                        message = node.feedback_message
+                        context.trace("status", tick=ticks, node=node.name, status=status, message=message)
             if on_tick is not None:
                 on_tick(root, context)
             if root.status in (Status.SUCCESS, Status.FAILURE):

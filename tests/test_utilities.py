@@ -92,8 +92,9 @@ def test_hierarchical_tracing_skips_only_free_bundles() -> None:
     prob = np.full((16, 16, 16), 0.02, dtype=np.float32)
     prob[8:, :, :] = 0.5
     grid = VoxelGrid(prob, np.zeros(3), RES)
-    origins = np.column_stack([np.full(64, -0.05), np.repeat(np.linspace(0.005, 0.155, 8), 8),
-                               np.tile(np.linspace(0.005, 0.155, 8), 8)])
+    origins = np.column_stack(
+        [np.full(64, -0.05), np.repeat(np.linspace(0.005, 0.155, 8), 8), np.tile(np.linspace(0.005, 0.155, 8), 8)]
+    )
     dirs = np.tile([1.0, 0.0, 0.0], (64, 1))
     fine = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0)[0]
     coarse = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1), bundle=1)[0]
@@ -129,8 +130,16 @@ class Counted:
 
 
 def utility_ctx(grid: VoxelGrid, iteration: int = 0, n_v: int = 100) -> PlanningContext:
-    ctx = PlanningContext(pvs=Counted(n_v), surface=None, grid=grid, sensor=OneBeam(), robot=None,
-                          region_min=np.zeros(3), region_max=np.ones(3), stack=CandidateStack())
+    ctx = PlanningContext(
+        pvs=Counted(n_v),
+        surface=None,
+        grid=grid,
+        sensor=OneBeam(),
+        robot=None,
+        region_min=np.zeros(3),
+        region_max=np.ones(3),
+        stack=CandidateStack(),
+    )
     ctx.iteration = iteration
     ctx.sensor_pose = np.eye(4)
     return ctx
@@ -171,7 +180,9 @@ def test_ig_quality_weights_and_variants(registry) -> None:  # noqa: ANN001
     ctx = utility_ctx(grid, iteration=5, n_v=100)  # omega = 5 / (5 + 5) = 0.5, thesis normalisation by N_v
     need = registry.create("utility", "ig_quality", {"normalise": "n_v"}).score(cands, ctx)
     assert need == pytest.approx(0.5 * e + 0.5 * np.array([0.7 * 1 + 0.3 * 1, 0.0]) / 100.0, rel=1e-5)
-    literal = registry.create("utility", "ig_quality", {"variant": "kriegel_literal", "normalise": "n_v"}).score(cands, ctx)
+    literal = registry.create("utility", "ig_quality", {"variant": "kriegel_literal", "normalise": "n_v"}).score(
+        cands, ctx
+    )
     assert literal == pytest.approx(0.5 * e + 0.5 * (1 - np.array([0.7, 0.0]) / 100.0), rel=1e-5)
     # the literal sign penalises the candidate that sees the border voxel; "need" rewards it
     ig_only = registry.create("utility", "ig_quality", {"omega": 0.0, "normalise": "n_v"}).score(cands, ctx)
