@@ -10,6 +10,7 @@ worker thread and :meth:`update` returns RUNNING until the result is there.
 from __future__ import annotations
 
 import traceback
+from abc import abstractmethod
 from concurrent.futures import Future
 from typing import Any
 
@@ -108,9 +109,9 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
             return Outcome(outcome)
         raise TypeError(f"{type(self).__name__}.work returned {outcome!r}")
 
+    @abstractmethod
     def work(self) -> Outcome | Status | None:
         """Do the step; return an Outcome (None means success)."""
-        raise NotImplementedError
 
     # -- blackboard helpers ----------------------------------------------------------------------
     def read(self, key: str, default: Any = None) -> Any:

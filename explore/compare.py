@@ -15,6 +15,7 @@ OpenMP / numba threads each), so the same seeds give the same results locally an
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import itertools
@@ -273,10 +274,8 @@ class IsolatedRun:
     def kill(self) -> None:
         """End the run's whole process group (the run and anything it started)."""
         if self.process.poll() is None:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.killpg(self.process.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
         self.process.wait()
 
     def _crash_reason(self, code: int) -> str:

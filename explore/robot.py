@@ -7,6 +7,7 @@ unlimited workspace, as in the thesis benchmark.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,7 +18,7 @@ if TYPE_CHECKING:
     from .simulation import Simulation
 
 
-class Robot:
+class Robot(ABC):
     """Base class: configuration space, FK/IK, distance, execution."""
 
     kind = "robot"
@@ -35,13 +36,13 @@ class Robot:
         """Add the robot to the simulation (load bodies, read limits)."""
         self.sim = sim
 
+    @abstractmethod
     def fk(self, q: Array) -> Pose:
         """world_T_sensor for configuration ``q``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def ik(self, world_T_sensor: Pose, rng: np.random.Generator | None = None) -> Array | None:
         """A configuration that puts the sensor at ``world_T_sensor``, or None if unreachable."""
-        raise NotImplementedError
 
     @property
     def sensor_pose(self) -> Pose:

@@ -8,6 +8,7 @@ against the ground truth with Open3D's ``RaycastingScene``.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,7 +46,7 @@ def noise_sigma(model: str, d: Array, scale: float = 1.0) -> Array:
     raise ValueError(f"unknown noise model {model!r} (valid: {', '.join(NOISE_MODELS)})")
 
 
-class RaySensor:
+class RaySensor(ABC):
     """Base class of the simulated range sensors.
 
     Subclasses set ``geometry`` ("area" or "line"), the working range, the beam directions
@@ -67,9 +68,9 @@ class RaySensor:
     no_return_clears: bool = True
     model_sigma_floor: float = 1e-3  # m: smallest sigma the PVS assumes (voxel scale)
 
+    @abstractmethod
     def local_directions(self) -> Points3:
         """Unit beam directions (k, 3) in the sensor frame."""
-        raise NotImplementedError
 
     @property
     def optimal_distance(self) -> float:

@@ -122,9 +122,6 @@ class StraightLine:
     name = "straight_line"
     params = ()
 
-    def __init__(self, **values: Any) -> None:
-        pass
-
     def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
         return straight_line(problem, np.asarray(start, dtype=float), np.asarray(goal, dtype=float))
 
