@@ -111,7 +111,7 @@ def test_modelling_run_rises_and_beats_random(registry) -> None:  # noqa: ANN001
     assert np.all(np.diff(curve) >= -1e-3)  # ground-truth coverage never drops
     assert curve[-1] > 0.8
     assert m["sources"][0] == "initial" and set(m["sources"][1:]) <= {"boundary", "hole", "fallback_sphere"}
-    assert len(m["selection_s"]) == 4 and max(m["selection_s"]) < 2.0
+    assert len(m["selection_s"]) == 4  # selection speed is measured in benchmarks/reproduce_kriegel.py
     assert m["scan_path_m"] > 0 and m["travel_m"] >= m["scan_path_m"]
     _, baseline = run_session(registry, "random/random", 5)
     assert curve[-1] > baseline.metrics["coverage"][-1]
