@@ -117,10 +117,6 @@ def test_ground_truth_itself_and_half_of_it(bunny) -> None:
     assert metrics.coverage(half) == pytest.approx(0.5, abs=0.03)
     result = metrics.evaluate(dense)
     assert result["coverage"] == 1.0 and result["rms_error"] < 1e-5 and result["chamfer"] < 1e-3
-    start = time.perf_counter()
-    for _ in range(5):
-        metrics.evaluate(half)
-    assert (time.perf_counter() - start) / 5 < 0.2  # ~15 ms on an idle machine
     empty = metrics.evaluate(np.zeros((0, 3)))
     assert empty["coverage"] == 0.0 and np.isnan(empty["rms_error"])
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -75,15 +73,12 @@ def test_local_recognisers_recover_duck_pose(registry, scene, method):
     scan, clusters, models, truth = scene
     recognizer = registry.create("recognizer", method)
     recognizer.recognize(clusters["duck"], models, scan)  # builds the model tables
-    started = time.perf_counter()
     hypotheses = recognizer.recognize(clusters["duck"], models, scan)
-    elapsed = time.perf_counter() - started
     _check_top(hypotheses, truth, "duck")
     assert hypotheses[0].diagnostics["q_h"] > 0.9
     # the best wrong model explains the cluster far worse (Eq. 3.10)
     best_wrong = max(h.quality for h in hypotheses if h.model != "duck")
     assert best_wrong < 0.5
-    assert elapsed < 2.0  # six models; ~0.3-0.7 s measured
 
 
 def test_ppf_ranks_right_model_on_most_clusters(scene):
