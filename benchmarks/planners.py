@@ -33,39 +33,70 @@ import numpy as np
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 PLANNERS_QUICK = ("rrt_connect", "rrt", "prm", "kpiece", "bit_star", "rrt_star")
-PLANNERS_FULL = PLANNERS_QUICK + ("lazy_prm",)
+PLANNERS_FULL = PLANNERS_QUICK + ("bkpiece", "fmt", "informed_rrt_star")  # lazy_prm: not in ompl 2.0.1's wheel
 WORLDS = (("workcell", False), ("cluttered", True), ("two_tables", True), ("bunny_pedestal", False),
           ("tabletop", False))
 
 
-def _queries(sim: Any, problem: Any, count: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Pairs of valid configurations whose sensor looks at the region."""
+def view_poses(sim: Any, count: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Views 0.3 m from points in the region, 20-50 deg off vertical, from the robot's side.
+
+    The reachable viewpoints an NBV planner asks an arm for (as ``tests/test_robots.py``):
+    uniformly oriented views around a table are mostly out of an arm's reach, and each failed
+    IK costs every restart.
+    """
     from explore.geometry import look_at
 
+    base = sim.spec.robot.base
+    poses = []
+    for target in rng.uniform(sim.spec.region_min, sim.spec.region_max, size=(count, 3)):
+        toward = rng.uniform(-np.pi, np.pi) if base is None else \
+            float(np.arctan2(base[1] - target[1], base[0] - target[0])) + rng.uniform(-1.0, 1.0)
+        elevation = rng.uniform(np.radians(20), np.radians(50))
+        d = np.array([np.sin(elevation) * np.cos(toward), np.sin(elevation) * np.sin(toward), np.cos(elevation)])
+        poses.append(look_at(target + 0.3 * d, target))
+    return poses
+
+
+def _queries(sim: Any, problem: Any, count: int, rng: np.random.Generator,
+             ik_attempts: int = 6) -> tuple[list[tuple[np.ndarray, np.ndarray]], dict[str, float]]:
+    """Pairs of valid configurations whose sensor looks at the region, and IK statistics.
+
+    Mobile robots: uniform states (the NBVS way). Arm and free flyer: IK to reachable views
+    (:func:`view_poses`) with ``ik_attempts`` restarts (capped: the robot's default is 30).
+    """
     robot = sim.robot
-    lo, hi = np.asarray(sim.spec.region_min), np.asarray(sim.spec.region_max)
-    centre = 0.5 * (lo + hi)
     configs: list[np.ndarray] = []
-    tries = 0
-    while len(configs) < 2 * count and tries < 400 * count:
-        tries += 1
-        if robot.base_dofs:  # mobile: uniform states (the NBVS way)
-            q = robot.sample_config(rng)
-            q[robot.base_dofs[2]] = rng.uniform(-np.pi, np.pi)
-        else:  # IK to a view of the region from outside it
-            direction = rng.normal(size=3)
-            direction[2] = abs(direction[2]) + 0.3
-            direction /= np.linalg.norm(direction)
-            eye = centre + direction * (np.linalg.norm(hi - lo) / 2 + rng.uniform(0.1, 0.3))
-            q = robot.ik(look_at(eye, centre + rng.uniform(-0.05, 0.05, 3)), rng)
-            if q is None:
-                continue
-        if problem.is_valid(q):
-            configs.append(np.asarray(q, dtype=float))
-    return [(configs[2 * i], configs[2 * i + 1]) for i in range(len(configs) // 2)]
+    tries, solved, ik_s = 0, 0, 0.0
+    saved = getattr(robot, "ik_attempts", None)
+    if saved is not None:
+        robot.ik_attempts = min(int(saved), ik_attempts)
+    try:
+        while len(configs) < 2 * count and tries < 50 * count:
+            tries += 1
+            if robot.base_dofs:
+                q = robot.sample_config(rng)
+                q[robot.base_dofs[2]] = rng.uniform(-np.pi, np.pi)
+            else:
+                t0 = time.perf_counter()
+                q = robot.ik(view_poses(sim, 1, rng)[0], rng)
+                ik_s += time.perf_counter() - t0
+                if q is None:
+                    continue
+                solved += 1
+            if problem.is_valid(q):
+                configs.append(np.asarray(q, dtype=float))
+    finally:
+        if saved is not None:
+            robot.ik_attempts = saved
+    stats = {"ik_tries": tries, "ik_success": solved / tries if not robot.base_dofs else float("nan"),
+             "ik_s_per_try": ik_s / tries if not robot.base_dofs else float("nan")}
+    return [(configs[2 * i], configs[2 * i + 1]) for i in range(len(configs) // 2)], stats
 
 
-def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: tuple[str, ...] = (),
+                 count: int | None = None) -> list[dict[str, Any]]:
+    """One row per world x planner (queries shared by the planners of a world)."""
     from explore.motion import MotionProblem
     from explore.pvs import PVS
     from explore.registry import Registry
@@ -73,7 +104,7 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = ()) -> list[dic
 
     registry = Registry.load()
     rows = []
-    count = 30 if full else 6
+    count = count or (30 if full else 15)
     for world, _mobile in WORLDS:
         if worlds and world not in worlds:
             continue
@@ -83,22 +114,35 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = ()) -> list[dic
             problem = MotionProblem(robot, space_free=pvs.is_free)
             if not problem.is_valid(robot.q):  # the region is the whole room (two_tables): known world only
                 problem = MotionProblem(robot)
-            queries = _queries(sim, problem, count, np.random.default_rng(0))
+            t0 = time.perf_counter()
+            queries, ik = _queries(sim, problem, count, np.random.default_rng(0))
+            log(f"{world}: {len(queries)} queries in {time.perf_counter() - t0:.1f} s "
+                f"(IK success {ik['ik_success']:.0%}, {ik['ik_s_per_try']:.2f} s per IK)")
             names: tuple[str, ...] = PLANNERS_FULL if full else PLANNERS_QUICK
             if robot.name == "free_flyer":
                 names = ("straight_line", "rrt_connect")
             elif robot.base_dofs:
                 names = names + ("kinodynamic",)
             for name in names:
-                params = {} if name in ("straight_line", "kinodynamic") else {"time_limit": 1.0, "try_direct": False}
-                if name == "kinodynamic":
-                    params = {"time_limit": 5.0 if full else 2.0, "goal_tolerance": 0.1}
-                planner = registry.create("motion_planner", name, params, "<bench>")
+                if planners and name not in planners:
+                    continue
+                limit = 1.0
+                params: dict[str, Any] = {"time_limit": limit, "try_direct": False}
+                if name == "straight_line":
+                    params = {}
+                elif name == "kinodynamic":
+                    limit = 5.0 if full else 3.0
+                    params = {"time_limit": limit}
+                if name not in registry.names("motion_planner"):  # any other OMPL planner by name
+                    params["planner"] = name
+                    planner = registry.create("motion_planner", "ompl", params, "<bench>")
+                else:
+                    planner = registry.create("motion_planner", name, params, "<bench>")
                 times, lengths, ok, collided, executed = [], [], 0, 0, 0
                 for index, (a, b) in enumerate(queries):
-                    t0 = time.perf_counter()
+                    t1 = time.perf_counter()
                     plan = planner.plan(problem, a, b, seed=index + 1)
-                    times.append(time.perf_counter() - t0)
+                    times.append(time.perf_counter() - t1)
                     if plan is None:
                         continue
                     ok += 1
@@ -108,14 +152,17 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = ()) -> list[dic
                     collided += int(run.collided)
                 row = {
                     "part": "planners", "world": world, "robot": robot.name, "planner": name,
-                    "queries": len(queries), "success": ok / max(1, len(queries)),
+                    "queries": len(queries), "time_limit_s": limit if name != "straight_line" else None,
+                    "success": ok / max(1, len(queries)),
                     "median_time_s": float(np.median(times)) if times else float("nan"),
+                    "max_time_s": float(np.max(times)) if times else float("nan"),
                     "median_length": float(np.median(lengths)) if lengths else float("nan"),
-                    "collision_rate": collided / max(1, executed),
+                    "collision_rate": collided / max(1, executed), "ik_success": ik["ik_success"],
                 }
                 rows.append(row)
                 log(f"{world:15s} {name:14s} success {row['success']:5.0%}  median {row['median_time_s']:6.3f} s  "
-                    f"length {row['median_length']:7.2f}  collisions {row['collision_rate']:5.0%}")
+                    f"max {row['max_time_s']:6.3f} s  length {row['median_length']:7.2f}  "
+                    f"collisions {row['collision_rate']:5.0%}")
     return rows
 
 
@@ -182,6 +229,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--part", choices=("all", "planners", "nbvs"), default="all")
     parser.add_argument("--worlds", default="", help="comma-separated subset of the planner worlds")
+    parser.add_argument("--planners", default="", help="comma-separated subset of the planners")
+    parser.add_argument("--queries", type=int, default=None, help="queries per world (15; --full 30)")
     args = parser.parse_args(argv)
 
     def log(line: str) -> None:
@@ -190,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
 
     rows: list[dict[str, Any]] = []
     if args.part in ("all", "planners"):
-        rows += planner_rows(args.full, log, tuple(w for w in args.worlds.split(",") if w))
+        rows += planner_rows(args.full, log, tuple(w for w in args.worlds.split(",") if w),
+                             tuple(p for p in args.planners.split(",") if p), args.queries)
     if args.part in ("all", "nbvs"):
         rows += nbvs_rows(args.full, log)
     if args.json:

@@ -45,7 +45,6 @@ GEOMETRIC_PLANNERS: dict[str, str] = {
     "informed_rrt_star": "InformedRRTstar",
     "prm": "PRM",
     "prm_star": "PRMstar",
-    "lazy_prm": "LazyPRM",
     "kpiece": "KPIECE1",
     "bkpiece": "BKPIECE1",
     "lbkpiece": "LBKPIECE1",
@@ -55,8 +54,9 @@ GEOMETRIC_PLANNERS: dict[str, str] = {
     "aorrtc": "AORRTC",
     "sorrt_star": "SORRTstar",
 }
-# ompl 2.0.1's Python wheel lacks LazyPRM; use PRM until the bindings have it
-LAZY_FALLBACK: dict[str, str] = {"LazyPRM": "PRM", "LazyPRMstar": "PRMstar"}
+# Planners of OMPL's C++ library that a Python wheel may lack (ompl 2.0.1 binds neither):
+# they are offered only when ``ompl.geometric`` has the class, never replaced by another one.
+OPTIONAL_GEOMETRIC: dict[str, str] = {"lazy_prm": "LazyPRM", "lazy_prm_star": "LazyPRMstar"}
 CONTROL_PLANNERS: dict[str, str] = {"rrt": "RRT", "kpiece": "KPIECE1", "sst": "SST", "est": "EST", "pdst": "PDST"}
 
 
@@ -300,8 +300,17 @@ class MotionProblem:
         return True
 
     def is_valid_motion(self, a: Array, b: Array, resolution: float | None = None) -> bool:
-        """Straight-line motion from ``a`` to ``b`` checked every ``resolution`` (L2)."""
-        return path_is_valid(self, np.vstack([a, b]), resolution, margin=0.0)
+        """The motion from ``a`` to ``b`` as the robot executes it, checked every ``resolution`` (L2).
+
+        A straight line in configuration space, except for a differential base, which turns,
+        drives and turns (``robot.execution_path``).
+        """
+        return path_is_valid(self, self.motion_path(np.vstack([a, b])), resolution, margin=0.0)
+
+    def motion_path(self, path: np.ndarray) -> np.ndarray:
+        """The piecewise-linear path the robot really follows for ``path`` (see ``execution_path``)."""
+        expand = getattr(self.robot, "execution_path", None)
+        return np.asarray(path, dtype=float) if expand is None else np.asarray(expand(path), dtype=float)
 
 
 def _interpolate(path: np.ndarray, resolution: float) -> np.ndarray:
@@ -321,6 +330,8 @@ def validate_path(
     """Dense re-check; the index (into the interpolated path) of the first invalid state, or None.
 
     The default ``margin`` of 0 checks true contact, while planning uses the robot's clearance.
+    The path is checked as given (use ``problem.motion_path`` for what a differential base
+    really drives).
     """
     dense = _interpolate(path, resolution or problem.resolution)
     for index, q in enumerate(dense):
@@ -329,15 +340,10 @@ def validate_path(
     return None
 
 
-def path_is_valid(
-    problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
-) -> bool:
-    """Same test as ``validate_path(...) is None`` but in bisection order (van der Corput, as
-    OMPL's DiscreteMotionValidator): an invalid path is usually rejected after a few checks."""
-    dense = _interpolate(path, resolution or problem.resolution)
-    n = len(dense)
+def _bisection_order(n: int) -> list[int]:
+    """Indices 0..n-1, ends first, then midpoints (van der Corput, as OMPL's DiscreteMotionValidator)."""
     if n == 0:
-        return True
+        return []
     order = [0, n - 1] if n > 1 else [0]
     seen = set(order)
     step = n - 1
@@ -349,7 +355,35 @@ def path_is_valid(
                 order.append(index)
         step = half
     order.extend(i for i in builtins_range(n) if i not in seen)
-    return all(problem.is_valid(dense[i], margin=margin) for i in order)
+    return order
+
+
+def path_is_valid(
+    problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
+) -> bool:
+    """Same test as ``validate_path(...) is None`` but in bisection order: an invalid path is
+    usually rejected after a few checks."""
+    return bool(check_path_until(problem, path, None, resolution, margin))
+
+
+def check_path_until(
+    problem: MotionProblem,
+    path: np.ndarray,
+    deadline: float | None,
+    resolution: float | None = None,
+    margin: float | None = 0.0,
+) -> bool | None:
+    """Dense check in bisection order that gives up at ``deadline`` (``time.perf_counter``).
+
+    True: every state valid; False: an invalid state; None: the deadline passed first.
+    """
+    dense = _interpolate(path, resolution or problem.resolution)
+    for count, i in enumerate(_bisection_order(len(dense))):
+        if deadline is not None and count % 8 == 0 and time.perf_counter() > deadline:
+            return None
+        if not problem.is_valid(dense[i], margin=margin):
+            return False
+    return True
 
 
 def path_length(robot: Robot, path: np.ndarray) -> float:
@@ -395,17 +429,28 @@ def _state(space: Any, q: Array) -> Any:
     return state
 
 
+def geometric_planner_names() -> list[str]:
+    """The ``ompl.geometric`` planner classes this OMPL build offers (for lookups by name)."""
+    ob, og, _ = _ompl()
+    return sorted(n for n in dir(og) if isinstance(getattr(og, n), type) and issubclass(getattr(og, n), ob.Planner))
+
+
 def planner_class(name: str) -> Any:
-    """The OMPL geometric planner class for a plugin name or an ``og`` class name."""
+    """The OMPL geometric planner class for a plugin name or an ``og`` class name.
+
+    No substitution: a planner this OMPL build lacks (e.g. LazyPRM in the ompl 2.0.1 wheel)
+    is an error that lists the planners that exist.
+    """
     _, og, _ = _ompl()
-    cls_name = GEOMETRIC_PLANNERS.get(name, name)
-    cls = getattr(og, cls_name, None)
-    if cls is None and cls_name in LAZY_FALLBACK:  # LazyPRM is not in the ompl 2.0.1 wheel
-        cls = getattr(og, LAZY_FALLBACK[cls_name], None)
-    if cls is None:
-        valid = sorted(set(GEOMETRIC_PLANNERS) | {n for n in dir(og) if n[0].isupper()})
-        raise ValueError(f"unknown OMPL planner {name!r} (valid: {', '.join(valid)})")
-    return cls
+    cls_name = GEOMETRIC_PLANNERS.get(name) or OPTIONAL_GEOMETRIC.get(name) or name
+    available = geometric_planner_names()
+    if cls_name not in available:
+        aliases = [k for k, v in GEOMETRIC_PLANNERS.items() if v in available]
+        raise ValueError(f"unknown OMPL planner {name!r} (this OMPL offers: {', '.join(aliases + available)})")
+    return getattr(og, cls_name)
+
+
+SOLVE_SHARE = 0.5  # share of the remaining time a coarse search may use (the rest re-checks or retries)
 
 
 def plan(
@@ -423,41 +468,76 @@ def plan(
 ) -> MotionPlan | None:
     """A collision-free joint path from ``start`` to ``goal`` with an OMPL geometric planner.
 
-    Only exact solutions are returned, and every returned path is re-checked every
-    ``problem.resolution`` (L2, rad) with the clearance margin. Speed (``benchmarks/planners.py``,
-    workcell): the search checks motions every ``check_factor * problem.resolution`` (the
-    dense re-check guards the result; if it fails, the search is repeated at the fine
-    resolution with the time left), and simplification is bounded: ``reduceVertices`` and
-    ``collapseCloseVertices`` (shortcuts between path vertices, cf. the thesis' RRT-Connect +
-    Berchtold-Glavina smoothing) instead of ``ss.simplifySolution``, whose B-spline smoothing
-    and perturbation ran 0.3-0.4 s (1,800-2,300 validity checks) past a 0.1 s budget on an
-    iiwa query whose answer is one straight segment.
+    Only exact solutions are returned, and every returned segment has been checked every
+    ``problem.resolution`` (L2) with the clearance margin, as the robot executes it (a
+    differential base turns, drives and turns: OMPL checks motions with that local planner,
+    :class:`_ExecutedMotionValidator`). ``time_limit`` bounds the whole call: the search,
+    the simplification, the re-check and the retry (wall time from entry; one validity
+    check may run past it).
+
+    Speed (``benchmarks/planners.py``): the first search checks motions every
+    ``check_factor * problem.resolution`` with at most ``SOLVE_SHARE`` of the time, its result
+    is re-checked densely; if that fails, the search is repeated at the fine resolution
+    (whose result OMPL has checked densely already) with the time left. Simplification is
+    bounded: ``reduceVertices`` and ``collapseCloseVertices`` (shortcuts between path
+    vertices, cf. the thesis' RRT-Connect + Berchtold-Glavina smoothing) instead of
+    ``ss.simplifySolution``, whose B-spline smoothing and perturbation ran 0.3-0.4 s past a
+    0.1 s budget on an iiwa query whose answer is one straight segment.
     """
+    t0 = time.perf_counter()
+    deadline = t0 + float(time_limit)
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
     if not problem.is_valid(start) or not problem.is_valid(goal):
         return None
     if try_direct:  # the straight segment first (what simplification would return anyway)
-        direct = straight_line(problem, start, goal)
+        direct = straight_line(problem, start, goal, deadline=deadline)
         if direct is not None:
             direct.planner = planner
+            direct.planning_time = time.perf_counter() - t0
             return direct
-    t0 = time.perf_counter()
     factors = [max(1.0, float(check_factor))] + ([1.0] if check_factor > 1.0 else [])
     for attempt, factor in enumerate(factors):
-        remaining = float(time_limit) - (time.perf_counter() - t0)
+        remaining = deadline - time.perf_counter()
         if remaining <= 0.0:
             break
+        coarse = factor > 1.0
         seed_ompl(None if seed is None else seed + attempt)
-        path = _ompl_search(problem, start, goal, planner, remaining, simplify, range, goal_threshold, factor)
+        budget = remaining * SOLVE_SHARE if coarse else remaining
+        path = _ompl_search(problem, start, goal, planner, budget, simplify, range, goal_threshold, factor, deadline)
         if path is None:
-            if attempt == 0 and factor > 1.0 and time.perf_counter() - t0 < float(time_limit):
-                continue  # coarse search gave up early (e.g. an approximate solution); try fine
-            break
-        # OMPL checks motions with its own resolution; make sure every returned segment is valid
-        if validate_path(problem, path, margin=None) is None:
-            elapsed = time.perf_counter() - t0
-            return MotionPlan(path, planner=planner, planning_time=elapsed, length=path_length(problem.robot, path))
+            continue  # coarse search gave up (e.g. only an approximate solution): try fine
+        if coarse:  # OMPL checked every factor x resolution: check the rest now, within the limit
+            verdict = check_path_until(problem, problem.motion_path(path), deadline, margin=None)
+            if verdict is None:
+                break
+            if not verdict:
+                continue
+        return MotionPlan(path, planner=planner, planning_time=time.perf_counter() - t0,
+                          length=path_length(problem.robot, problem.motion_path(path)))
     return None
+
+
+class _ExecutedMotionValidator:
+    """OMPL motion validator that checks the motion the robot executes (turn-drive-turn).
+
+    Built lazily as a subclass of ``ompl.base.MotionValidator`` (the nanobind bindings call
+    the Python ``checkMotion``); used for robots whose ``execution_path`` differs from the
+    straight segment (a differential base).
+    """
+
+    @staticmethod
+    def create(si: Any, problem: MotionProblem, resolution: float, n: int, deadline: float | None) -> Any:
+        """A validator instance; past ``deadline`` every motion is invalid (the search winds down)."""
+        ob, _, _ = _ompl()
+
+        class Validator(ob.MotionValidator):
+            def checkMotion(self, a: Any, b: Any, *last_valid: Any) -> bool:  # noqa: N802 - OMPL's name
+                qa = [a[i] for i in builtins_range(n)]
+                qb = [b[i] for i in builtins_range(n)]
+                path = problem.motion_path(np.array([qa, qb]))
+                return bool(check_path_until(problem, path, deadline, resolution, margin=None))
+
+        return Validator(si)
 
 
 def _ompl_search(
@@ -470,27 +550,33 @@ def _ompl_search(
     step: float,
     goal_threshold: float,
     check_factor: float,
+    deadline: float | None = None,
 ) -> np.ndarray | None:
-    """One OMPL solve with motions checked every ``check_factor * problem.resolution``."""
+    """One OMPL solve with motions checked every ``check_factor * problem.resolution``.
+
+    Simplification is skipped once ``deadline`` has passed (the unsimplified path is valid).
+    """
     ob, og, _ = _ompl()
     n = len(start)
     space = _space(ob, problem.lower, problem.upper)
     ss = og.SimpleSetup(space)
     ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in builtins_range(n)]))
     si = ss.getSpaceInformation()
-    si.setStateValidityCheckingResolution(
-        min(1.0, check_factor * problem.resolution / max(space.getMaximumExtent(), 1e-9))
-    )
+    resolution = check_factor * problem.resolution
+    si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
+    probe = np.vstack([start, goal])
+    if problem.motion_path(probe).shape != probe.shape:  # the robot does not drive straight segments
+        si.setMotionValidator(_ExecutedMotionValidator.create(si, problem, resolution, n, deadline))
     instance = planner_class(planner)(si)
     if step > 0 and hasattr(instance, "setRange"):
         instance.setRange(step)
     ss.setPlanner(instance)
     ss.setStartAndGoalStates(_state(space, start), _state(space, goal), goal_threshold)
-    status = ss.solve(float(time_limit))
+    status = ss.solve(max(1e-3, float(time_limit)))
     if not status or not ss.haveExactSolutionPath():
         return None
     solution = ss.getSolutionPath()
-    if simplify and solution.getStateCount() > 2:
+    if simplify and solution.getStateCount() > 2 and (deadline is None or time.perf_counter() < deadline):
         simplifier = og.PathSimplifier(si)
         simplifier.reduceVertices(solution)
         simplifier.collapseCloseVertices(solution)
@@ -505,15 +591,20 @@ def _ompl_search(
 builtins_range = range  # ``plan`` shadows ``range`` with OMPL's parameter name
 
 
-def straight_line(problem: MotionProblem, start: Array, goal: Array) -> MotionPlan | None:
-    """The straight segment in configuration space if it is valid (the free flyer's planner)."""
+def straight_line(
+    problem: MotionProblem, start: Array, goal: Array, deadline: float | None = None
+) -> MotionPlan | None:
+    """The straight segment in configuration space if it is valid (the free flyer's planner).
+
+    Checked as the robot executes it (``problem.motion_path``); None when invalid or when
+    ``deadline`` (``time.perf_counter``) passes before the check ends.
+    """
     t0 = time.perf_counter()
     path = np.vstack([start, goal]).astype(float)
-    if not path_is_valid(problem, path, margin=None):
+    if not check_path_until(problem, problem.motion_path(path), deadline, margin=None):
         return None
-    return MotionPlan(
-        path, planner="straight_line", planning_time=time.perf_counter() - t0, length=path_length(problem.robot, path)
-    )
+    return MotionPlan(path, planner="straight_line", planning_time=time.perf_counter() - t0,
+                      length=path_length(problem.robot, problem.motion_path(path)))
 
 
 def plan_kinodynamic(

@@ -12,7 +12,16 @@ from typing import Any
 
 import numpy as np
 
-from explore.motion import MotionPlan, MotionProblem, plan, plan_kinodynamic, straight_line
+from explore.errors import BadInput
+from explore.motion import (
+    OPTIONAL_GEOMETRIC,
+    MotionPlan,
+    MotionProblem,
+    plan,
+    plan_kinodynamic,
+    planner_class,
+    straight_line,
+)
 from explore.params import Param
 from explore.typed import Array
 
@@ -66,16 +75,22 @@ RRTConnect = _geometric(
 RRT = _geometric("rrt", "RRT", "Single-tree RRT (LaValle 1998).")
 RRTStar = _geometric("rrt_star", "RRTstar", "Asymptotically optimal RRT* (uses the whole time limit).")
 PRM = _geometric("prm", "PRM", "Probabilistic roadmap (Kavraki 1996), as in Kriegel et al. 2012.")
-LazyPRM = _geometric("lazy_prm", "LazyPRM", "Lazy PRM: edges checked only on the candidate path.")
 KPIECE = _geometric("kpiece", "KPIECE1", "KPIECE: projection-based cell exploration.")
 BITStar = _geometric("bit_star", "BITstar", "Batch informed trees BIT* (asymptotically optimal).")
 
 
 class OmplByName(GeometricPlanner):
-    """Any other OMPL geometric planner, chosen by its ompl.geometric class name."""
+    """Any OMPL geometric planner by its ompl.geometric class name (the wheel's list; no LazyPRM in ompl 2.0.1)."""
 
     name = "ompl"
     params = (Param("planner", str, "BKPIECE1", "", "ompl.geometric class name (e.g. FMT, PRMstar)"), *_GEOMETRIC)
+
+    def __init__(self, **values: Any) -> None:
+        super().__init__(**values)
+        try:
+            planner_class(self.planner)
+        except ValueError as error:
+            raise BadInput("<motion_planner ompl>", "planner", str(error)) from None
 
     def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
         return plan(
@@ -126,4 +141,17 @@ class StraightLine:
         return straight_line(problem, np.asarray(start, dtype=float), np.asarray(goal, dtype=float))
 
 
-PLUGINS = [RRTConnect, RRT, RRTStar, PRM, LazyPRM, KPIECE, BITStar, OmplByName, Kinodynamic, StraightLine]
+def _optional_planners() -> list[type[GeometricPlanner]]:
+    """Planners registered only if the installed OMPL binds them (ompl 2.0.1's wheel has no
+    LazyPRM / LazyPRMstar, so ``lazy_prm`` is then absent: never silently another planner)."""
+    try:
+        from ompl import geometric as og
+    except ImportError:
+        return []
+    docs = {"lazy_prm": "Lazy PRM (Bohlin & Kavraki 2000): edges checked only on the candidate path.",
+            "lazy_prm_star": "Asymptotically optimal Lazy PRM*."}
+    return [_geometric(name, cls, docs[name]) for name, cls in OPTIONAL_GEOMETRIC.items() if hasattr(og, cls)]
+
+
+PLUGINS = [RRTConnect, RRT, RRTStar, PRM, KPIECE, BITStar, OmplByName, Kinodynamic, StraightLine,
+           *_optional_planners()]

@@ -54,6 +54,11 @@ def _planar(x: float, y: float, theta: float, z: float = 0.0) -> Pose:
     return pose
 
 
+def _wrap(angle: float) -> float:
+    """Angle in [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
 def _pose6(values: list[float]) -> Pose:
     """[x, y, z (m), roll, pitch, yaw (deg)] -> 4x4."""
     pose = np.eye(4)
@@ -292,31 +297,53 @@ class _BulletRobot(Robot):
         return speeds
 
     def _expand_differential(self, path: np.ndarray) -> np.ndarray:
-        """Turn-drive-turn waypoints so a differential base can follow a geometric path."""
+        """Turn-drive-turn waypoints so a differential base can follow a geometric path.
+
+        Each segment a -> b becomes: turn in place to the drive heading, drive straight,
+        turn to b's heading. The drive heading (forwards or backwards) minimises the total
+        turning and takes the value closest to the mean of both headings, and the other
+        joints move in proportion to the time of the three pieces, so the expansion of b -> a
+        is that of a -> b reversed (a symmetric local planner, as OMPL's bidirectional
+        planners assume).
+        """
         x, y, th = self.base_dofs
-        out = [path[0]]
-        for b in path[1:]:
-            a = out[-1]
+        out = [np.asarray(path[0], dtype=float)]
+        for a, b in zip(path[:-1], path[1:], strict=True):
+            a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
             d = b[[x, y]] - a[[x, y]]
-            if np.linalg.norm(d) > 1e-6:
-                heading = math.atan2(d[1], d[0])
-                # drive forwards or backwards, whichever needs the smaller turn
-                options = [heading, heading + math.pi]
-                turns = [(h - a[th] + math.pi) % (2 * math.pi) - math.pi for h in options]
-                turn = min(turns, key=abs)
-                q1 = a.copy()
-                q1[th] = a[th] + turn
-                q2 = q1.copy()
-                q2[[x, y]] = b[[x, y]]
-                out.extend([q1, q2])
-            out.append(b)
+            drive = float(np.hypot(d[0], d[1]))
+            if drive <= 1e-6:
+                out.append(b)
+                continue
+            heading = math.atan2(d[1], d[0])
+            options = (heading, heading + math.pi)
+            cost = [abs(_wrap(h - a[th])) + abs(_wrap(b[th] - h)) for h in options]
+            best = options[int(np.argmin(cost))]
+            mid = 0.5 * (a[th] + b[th])
+            h = mid + _wrap(best - mid)
+            pieces = np.array([abs(h - a[th]) / self.base_turn_speed, drive / self.base_speed,
+                               abs(b[th] - h) / self.base_turn_speed])
+            s1, s2 = np.cumsum(pieces)[:2] / max(float(pieces.sum()), 1e-12)
+            q1, q2 = a + s1 * (b - a), a + s2 * (b - a)
+            q1[[x, y]], q1[th] = a[[x, y]], h
+            q2[[x, y]], q2[th] = b[[x, y]], h
+            out.extend([q1, q2, b])
         return np.asarray(out)
+
+    def execution_path(self, path: np.ndarray) -> np.ndarray:
+        """The piecewise-linear configuration path that ``controls_from_path`` executes.
+
+        A differential base cannot move sideways: its segments become turn-drive-turn
+        (:meth:`_expand_differential`); every other robot follows the path as it is.
+        """
+        path = np.asarray(path, dtype=float)
+        if self.drive == "differential" and self.base_dofs:
+            return self._expand_differential(path)
+        return path
 
     def controls_from_path(self, path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nominal per-``dt`` velocity controls following ``path``, and the nominal rollout."""
-        path = np.asarray(path, dtype=float)
-        if self.drive == "differential" and self.base_dofs:
-            path = self._expand_differential(path)
+        path = self.execution_path(path)
         speeds = self._speeds()
         nb = self.n_base_controls
         controls = []
