@@ -122,7 +122,7 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
             if robot.name == "free_flyer":
                 names = ("straight_line", "rrt_connect")
             elif robot.base_dofs:
-                names = names + ("kinodynamic",)
+                names = names + ("tuck_and_drive", "kinodynamic_rrt", "kinodynamic_kpiece", "kinodynamic_est")
             for name in names:
                 if planners and name not in planners:
                     continue
@@ -130,9 +130,11 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
                 params: dict[str, Any] = {"time_limit": limit, "try_direct": False}
                 if name == "straight_line":
                     params = {}
-                elif name == "kinodynamic":
-                    limit = 5.0 if full else 3.0
+                elif name.startswith("kinodynamic") or name == "tuck_and_drive":
+                    limit = 5.0
                     params = {"time_limit": limit}
+                    if name.startswith("kinodynamic_"):
+                        name, params["planner"] = "kinodynamic", name.split("_", 1)[1]
                 if name not in registry.names("motion_planner"):  # any other OMPL planner by name
                     params["planner"] = name
                     planner = registry.create("motion_planner", "ompl", params, "<bench>")
@@ -150,8 +152,11 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
                     run = robot.execute(plan, np.random.default_rng(index), noise=True, world="true")
                     executed += 1
                     collided += int(run.collided)
+                label = name if "planner" not in params or name == "ompl" else f"{name}_{params['planner']}"
+                if name == "ompl":
+                    label = params["planner"]
                 row = {
-                    "part": "planners", "world": world, "robot": robot.name, "planner": name,
+                    "part": "planners", "world": world, "robot": robot.name, "planner": label,
                     "queries": len(queries), "time_limit_s": limit if name != "straight_line" else None,
                     "success": ok / max(1, len(queries)),
                     "median_time_s": float(np.median(times)) if times else float("nan"),
@@ -160,7 +165,7 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
                     "collision_rate": collided / max(1, executed), "ik_success": ik["ik_success"],
                 }
                 rows.append(row)
-                log(f"{world:15s} {name:14s} success {row['success']:5.0%}  median {row['median_time_s']:6.3f} s  "
+                log(f"{world:15s} {label:18s} success {row['success']:5.0%}  median {row['median_time_s']:6.3f} s  "
                     f"max {row['max_time_s']:6.3f} s  length {row['median_length']:7.2f}  "
                     f"collisions {row['collision_rate']:5.0%}")
     return rows
@@ -209,10 +214,13 @@ def nbvs_rows(full: bool, log: Any) -> list[dict[str, Any]]:
 def print_tables(rows: list[dict[str, Any]]) -> None:
     planner = [r for r in rows if r["part"] == "planners"]
     if planner:
-        print("\nworld            planner         success  median s   length  exec. collisions")
+        print("\nworld            robot               planner             limit s  success  median s   max s  "
+              "length  exec. collisions")
         for r in planner:
-            print(f"{r['world']:16s} {r['planner']:14s} {r['success']:8.0%} {r['median_time_s']:9.3f} "
-                  f"{r['median_length']:8.2f} {r['collision_rate']:10.0%}")
+            limit = "-" if r["time_limit_s"] is None else f"{r['time_limit_s']:.1f}"
+            print(f"{r['world']:16s} {r['robot']:19s} {r['planner']:18s} {limit:>7s} {r['success']:8.0%} "
+                  f"{r['median_time_s']:9.3f} {r['max_time_s']:7.3f} {r['median_length']:7.2f} "
+                  f"{r['collision_rate']:10.0%}")
     nbvs = [r for r in rows if r["part"] == "nbvs"]
     if nbvs:
         print("\nVasquez-Gomez Table 5 (cluttered bunny, noisy mobile manipulator)")

@@ -261,6 +261,8 @@ class MotionProblem:
     A configuration is valid if it is within the joint limits, the robot is at least
     ``margin`` away from every known environment body, does not collide with itself, and
     (with ``space_free``) every point sampled on its links is free in the PVS.
+    ``space_bounds`` (lo, hi): ``space_free`` calls everything outside this box free, so only
+    the robot parts near it are sampled (derived automatically for ``pvs.is_free``).
     """
 
     def __init__(
@@ -269,20 +271,35 @@ class MotionProblem:
         space_free: SpaceFree | None = None,
         margin: float | None = None,
         resolution: float = 0.01,
+        space_bounds: tuple[Array, Array] | None = None,
     ) -> None:
         self.robot = robot
         self.space_free = space_free
         self.margin = float(getattr(robot, "clearance", 0.0) if margin is None else margin)
         self.resolution = float(resolution)  # max configuration step (L2) between checks
         self.checks = 0
+        self.space_bounds = space_bounds if space_bounds is not None else _free_outside_box(space_free)
+        self.pins: dict[int, float] = {}
 
     @property
     def lower(self) -> Array:
-        return np.asarray(self.robot.lower, dtype=float)
+        lower = np.asarray(self.robot.lower, dtype=float).copy()
+        for index, value in self.pins.items():
+            lower[index] = value
+        return lower
 
     @property
     def upper(self) -> Array:
-        return np.asarray(self.robot.upper, dtype=float)
+        upper = np.asarray(self.robot.upper, dtype=float).copy()
+        for index, value in self.pins.items():
+            upper[index] = value
+        return upper
+
+    def pinned(self, dofs: Sequence[int], q: Array) -> MotionProblem:
+        """The same problem with the joints ``dofs`` held at their values in ``q`` (e.g. the base)."""
+        out = MotionProblem(self.robot, self.space_free, self.margin, self.resolution, self.space_bounds)
+        out.pins = {**self.pins, **{int(i): float(q[i]) for i in dofs}}
+        return out
 
     def is_valid(self, q: Array, margin: float | None = None) -> bool:
         """Validity of one configuration (limits, known environment, self, free space)."""
@@ -294,7 +311,10 @@ class MotionProblem:
         if robot.in_collision(q, world="known", margin=self.margin if margin is None else margin):
             return False
         if self.space_free is not None:
-            points = robot.link_points(q)
+            if self.space_bounds is None:
+                points = robot.link_points(q)
+            else:  # only parts near the box whose outside ``space_free`` calls free
+                points = robot.link_points(q, within=self.space_bounds)
             if len(points) and not bool(np.all(self.space_free(points))):
                 return False
         return True
@@ -311,6 +331,14 @@ class MotionProblem:
         """The piecewise-linear path the robot really follows for ``path`` (see ``execution_path``)."""
         expand = getattr(self.robot, "execution_path", None)
         return np.asarray(path, dtype=float) if expand is None else np.asarray(expand(path), dtype=float)
+
+
+def _free_outside_box(space_free: SpaceFree | None) -> tuple[Array, Array] | None:
+    """The grid box of ``pvs.is_free`` (which calls every point outside its grid free), else None."""
+    owner = getattr(space_free, "__self__", None)
+    if getattr(space_free, "__name__", "") == "is_free" and hasattr(owner, "min_corner"):
+        return np.asarray(owner.min_corner, dtype=float), np.asarray(owner.max_corner, dtype=float)
+    return None
 
 
 def _interpolate(path: np.ndarray, resolution: float) -> np.ndarray:
@@ -607,114 +635,408 @@ def straight_line(
                       length=path_length(problem.robot, problem.motion_path(path)))
 
 
+def box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
+    """Euclidean distance (n,) from points to the nearest of the boxes [lo_b, hi_b] (0 inside)."""
+    if len(lo) == 0:
+        return np.full(len(points), np.inf)
+    gap = np.maximum(np.maximum(lo[None] - points[:, None], 0.0), points[:, None] - hi[None])  # (n, b, 3)
+    return np.sqrt(np.einsum("nbk,nbk->nb", gap, gap)).min(axis=1)
+
+
+class PlanarChecker:
+    """Validity of base poses (x, y, theta) with every other joint fixed at ``q_ref``.
+
+    The robot then moves as a rigid body in the plane, so points sampled on its surface
+    every ``spacing`` (``robot.link_points``) are moved instead of re-posing pybullet. The
+    PVS test (``problem.space_free`` on those points) is the one :meth:`MotionProblem.is_valid`
+    makes; the known environment is tested against the bodies' bounding boxes: a pose whose
+    points keep ``margin`` + ``slack`` from every box is valid (``slack`` covers the gaps
+    between the surface samples, sqrt(3) x spacing, and convex collision hulls, 2 cm); closer
+    poses get the full pybullet test (``fast`` / ``exact`` count both). Self-collision
+    cannot change (the joints are fixed; ``q_ref`` must be valid). Boxes below (or above) the
+    robot by at least ``margin`` never come closer in a planar motion and are left out (the
+    floor).
+    """
+
+    def __init__(self, problem: MotionProblem, q_ref: Array, spacing: float = 0.015) -> None:
+        robot = problem.robot
+        self.problem, self.q_ref = problem, np.asarray(q_ref, dtype=float).copy()
+        self.base = list(robot.base_dofs)
+        x, y, th = self.q_ref[self.base]
+        points = robot.link_points(self.q_ref, spacing=spacing)
+        c, s = math.cos(th), math.sin(th)
+        rel = points[:, :2] - (x, y)
+        self.local = np.ascontiguousarray(np.column_stack([c * rel[:, 0] + s * rel[:, 1],
+                                                           -s * rel[:, 0] + c * rel[:, 1]]))
+        self.radius = float(np.sqrt((self.local**2).sum(axis=1)).max(initial=0.0))
+        self.z = np.ascontiguousarray(points[:, 2])
+        self.margin = problem.margin
+        self.slack = math.sqrt(3.0) * float(spacing) + 0.02
+        boxes = []
+        sim = getattr(robot, "sim", None)
+        if sim is not None and len(points):
+            from .bullet import p
+
+            zmin, zmax = float(self.z.min()), float(self.z.max())
+            for body in sim.environment_ids():
+                lo, hi = p.getAABB(body, physicsClientId=sim.client)
+                if hi[2] <= zmin - self.margin or lo[2] >= zmax + self.margin:
+                    continue
+                boxes.append((lo, hi))
+        self.lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 3)
+        self.hi = np.array([b[1] for b in boxes], dtype=float).reshape(-1, 3)
+        self.lower, self.upper = problem.lower[self.base], problem.upper[self.base]
+        self._points = np.empty((len(self.local), 3))
+        if problem.space_free is None:
+            self._box = (np.full(3, np.inf), np.full(3, -np.inf))
+        elif problem.space_bounds is None:  # an unknown free-space test: every point goes to it
+            self._box = (np.full(3, -np.inf), np.full(3, np.inf))
+        else:
+            self._box = tuple(np.asarray(b, dtype=float) for b in problem.space_bounds)
+        self.fast = 0
+        self.exact = 0
+
+    def full(self, qb: Array) -> Array:
+        """The whole configuration at base pose ``qb``."""
+        q = self.q_ref.copy()
+        q[self.base] = qb
+        return q
+
+    def __call__(self, qb: Array) -> bool:
+        from .motion_kernels import planar_points_clearance
+
+        qb = np.asarray(qb, dtype=float)
+        if np.any(qb < self.lower - 1e-9) or np.any(qb > self.upper + 1e-9):
+            return False
+        clearance, inside = planar_points_clearance(
+            self.local, self.z, self.radius, float(qb[0]), float(qb[1]), float(qb[2]), self.lo, self.hi,
+            self.margin + self.slack, self._box[0], self._box[1], self._points)
+        space_free = self.problem.space_free
+        if space_free is not None and inside:
+            points = self._points
+            near = points[np.all((points >= self._box[0]) & (points <= self._box[1]), axis=1)]
+            if not bool(np.all(space_free(near))):
+                return False
+        if clearance >= self.margin + self.slack:
+            self.fast += 1
+            return True
+        self.exact += 1
+        return self.problem.is_valid(self.full(qb))
+
+
+class _BaseProblem:
+    """The base (x, y, theta) part of a problem with the other joints carried fixed.
+
+    Duck-types :class:`MotionProblem` for :func:`_ompl_search`: validity by a
+    :class:`PlanarChecker`, motions as the robot drives them (``problem.motion_path``).
+    """
+
+    def __init__(self, problem: MotionProblem, carried: Array, lower: Array, upper: Array) -> None:
+        self.problem, self.robot = problem, problem.robot
+        self.checker = PlanarChecker(problem, carried)
+        self.checker.lower, self.checker.upper = lower, upper
+        self.lower, self.upper = lower, upper
+        self.resolution = problem.resolution
+        self.base = self.checker.base
+
+    def is_valid(self, qb: Array, margin: float | None = None) -> bool:
+        return self.checker(qb)
+
+    def full_path(self, path: np.ndarray) -> np.ndarray:
+        out = np.tile(self.checker.q_ref, (len(path), 1))
+        out[:, self.base] = path
+        return out
+
+    def motion_path(self, path: np.ndarray) -> np.ndarray:
+        return self.problem.motion_path(self.full_path(np.asarray(path, dtype=float)))[:, self.base]
+
+
+def _joint_motion(problem: MotionProblem, a: Array, b: Array, deadline: float, seed: int | None) -> np.ndarray | None:
+    """Path moving only the non-base joints from ``a`` to ``b`` (straight if valid, else RRT-Connect)."""
+    if not np.any(np.abs(np.asarray(b) - np.asarray(a)) > 1e-12):
+        return np.vstack([a]).astype(float)
+    path = np.vstack([a, b]).astype(float)
+    verdict = check_path_until(problem, path, deadline, margin=None)
+    if verdict:
+        return path
+    if verdict is None:
+        return None
+    pinned = problem.pinned(list(problem.robot.base_dofs), a)
+    sub = plan(pinned, a, b, "rrt_connect", time_limit=max(0.0, deadline - time.perf_counter()), seed=seed)
+    return None if sub is None else sub.path
+
+
+def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: bool) -> list[Array]:
+    """Joint values to drive with, best first: the robot's ``travel_joints`` (with ``tuck``),
+    the start's, the goal's; each valid at the start and at the goal base pose."""
+    robot = problem.robot
+    base = list(robot.base_dofs)
+    joints = [i for i in builtins_range(len(start)) if i not in base]
+    options = [start[joints], goal[joints]]
+    travel = getattr(robot, "travel_joints", None)
+    if tuck and travel is not None and joints:
+        options.insert(0, np.asarray(travel, dtype=float))
+    out: list[Array] = []
+    for values in options:
+        if any(np.allclose(values, o) for o in out):
+            continue
+        a, b = start.copy(), goal.copy()
+        a[joints], b[base] = values, goal[base]
+        b[joints] = values
+        if problem.is_valid(a) and problem.is_valid(b):
+            out.append(values)
+    return out
+
+
+def _mobile_plan(
+    problem: MotionProblem,
+    start: Array,
+    goal: Array,
+    drive: Callable[[_BaseProblem, Array, Array, float], tuple[np.ndarray, np.ndarray] | None],
+    time_limit: float,
+    seed: int | None,
+    tuck: bool,
+    name: str,
+) -> MotionPlan | None:
+    """Joints to the carried values, the base by ``drive``, joints to the goal; one MotionPlan.
+
+    ``drive(base_problem, start_base, goal_base, deadline)`` returns the base rollout (m + 1, 3)
+    at ``robot.dt`` and its base controls (m, nb), or None. The drive is checked by the
+    planar checker, the joint motions with pybullet, all within ``time_limit``.
+    """
+    t0 = time.perf_counter()
+    deadline = t0 + float(time_limit)
+    robot = problem.robot
+    base = list(robot.base_dofs)
+    if not base:
+        raise ValueError(f"{robot.name} has no base to drive")
+    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float).copy()
+    if not problem.is_valid(start) or not problem.is_valid(goal):
+        return None
+    th = base[2]
+    goal[th] = start[th] + _wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
+    joints = [i for i in builtins_range(len(start)) if i not in base]
+    lower, upper = problem.lower[base].copy(), problem.upper[base].copy()
+    lower[2], upper[2] = start[th] - 2 * math.pi, start[th] + 2 * math.pi
+    for values in _carried_joints(problem, start, goal, tuck):
+        if time.perf_counter() >= deadline:
+            return None
+        carried = start.copy()
+        carried[joints] = values
+        first = _joint_motion(problem, start, carried, deadline, seed)
+        if first is None:
+            continue
+        sub = _BaseProblem(problem, carried, lower, upper)
+        driven = drive(sub, carried[base], goal[base], deadline)
+        if driven is None:
+            continue
+        rollout, base_controls = driven
+        reached = carried.copy()
+        reached[base] = rollout[-1]
+        target = reached.copy()
+        target[joints] = goal[joints]
+        last = _joint_motion(problem, reached, target, deadline, None if seed is None else seed + 1)
+        if last is None:
+            continue
+        pieces, control_pieces = [start[None]], []
+        for joint_path in (first, None, last):
+            if joint_path is None:
+                pieces.append(sub.full_path(rollout[1:]))
+                control_pieces.append(robot.base_to_full_controls(base_controls))
+            elif len(joint_path) > 1:
+                joint_controls, rolled = robot.controls_from_path(joint_path)
+                control_pieces.append(joint_controls)
+                pieces.append(rolled[1:])
+        path = np.vstack(pieces)
+        exact = bool(np.linalg.norm(rollout[-1] - goal[base]) < 1e-6)
+        return MotionPlan(path, controls=np.vstack(control_pieces), dt=float(robot.dt), planner=name,
+                          planning_time=time.perf_counter() - t0, exact=exact, length=path_length(robot, path))
+    return None
+
+
 def plan_kinodynamic(
     problem: MotionProblem,
     start: Array,
     goal: Array,
     planner: str = "rrt",
     time_limit: float = 5.0,
-    goal_tolerance: float = 0.05,
+    goal_tolerance: float = 0.4,
     seed: int | None = None,
-    max_steps: int = 20,
+    max_duration: float = 4.0,
+    tuck: bool = True,
+    goal_bias: float = 0.05,
+    propagation_step: float = 0.2,
+    min_duration: float = 0.8,
+    connect: bool = True,
 ) -> MotionPlan | None:
-    """Base motion with velocity controls (``ompl.control``), then the other joints.
+    """Base motion with velocity controls (``ompl.control``) between joint motions.
 
-    The base (x, y, theta) is planned with the robot's drive model (``robot.propagate``:
-    unicycle for a differential drive, omnidirectional otherwise) while the other joints
-    keep their start values; at the base goal the remaining joints move to the goal along a
-    checked straight line (or an RRT-Connect path). OMPL 2.0.1's Python bindings offer no
-    bidirectional control planner, so ``planner`` is one of rrt, kpiece, sst, est, pdst.
-    Returns per-step controls (``MotionPlan.controls``, held ``robot.dt`` each).
+    1. With ``tuck`` (and a robot with ``travel_joints``, the mobile manipulator's ``home``)
+       the arm first moves to its travel configuration at the start base pose (else the
+       start's or the goal's joints are carried, whichever is valid at both ends);
+    2. the base (x, y, theta) is planned with the robot's drive model (``robot.propagate_base``:
+       unicycle for a differential drive, omnidirectional otherwise), every other joint fixed,
+       until it is within ``goal_tolerance`` (L2 in m and rad) of the goal base pose; with
+       ``connect`` the robot's own steering (turn-drive-turn, or a straight omnidirectional
+       move) then closes the gap to the goal when that motion is valid;
+    3. the other joints move to their goal values at the reached base pose.
+
+    States are checked by :class:`PlanarChecker` (rigid planar motion of surface points
+    against boxes and the PVS; pybullet near obstacles) every ``propagation_step`` seconds
+    (rounded to multiples of ``robot.dt``), and the nominal rollout between them at
+    ``problem.resolution``; a control is held ``min_duration``..``max_duration`` seconds and
+    integrated at dt (the executor's Euler step); RRT extends toward the goal with probability
+    ``goal_bias`` (the other control planners of the ompl 2.0.1 bindings expose no goal bias;
+    SST and PDST have no constructor there); KPIECE and EST project states on (x, y).
+    ``time_limit`` bounds the whole call. The defaults were tuned on ``benchmarks/planners.py``
+    (cluttered, mobile manipulator): long controls and steps and a 0.4 goal region, closed by
+    the steering, beat short ones (few states per second with a Python propagator).
+    Returns per-step controls (``MotionPlan.controls``, held dt each) and their nominal
+    rollout; if the gap could not be closed, the final configuration is the reached one
+    (within the tolerance of ``goal``, ``MotionPlan.exact`` False): Vasquez-Gomez's RRT
+    Ext-Ext leaves such a gap too.
     """
     ob, _, _ = _ompl()
     from ompl import control as oc
 
+    cls = control_planner_class(planner)
     robot = problem.robot
-    base = list(robot.base_dofs)
-    if not base:
-        raise ValueError(f"{robot.name} has no base to plan kinodynamically")
-    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
-    if not problem.is_valid(start) or not problem.is_valid(goal):
-        return None
-    seed_ompl(seed)
-    t0 = time.perf_counter()
     dt = float(robot.dt)
-    space = _space(ob, problem.lower[base], problem.upper[base])
-    limits = robot.base_control_limits()  # (nb,) max |u| of the base controls
-    cspace = oc.RealVectorControlSpace(space, len(limits))
-    cbounds = ob.RealVectorBounds(len(limits))
-    for i, u in enumerate(limits):
-        cbounds.setLow(i, -float(u))
-        cbounds.setHigh(i, float(u))
-    cspace.setBounds(cbounds)
-    ss = oc.SimpleSetup(cspace)
-    nb, nc = len(base), len(limits)
 
-    def full(s: Any) -> Array:
-        q = start.copy()
-        q[base] = [s[i] for i in builtins_range(nb)]
-        return q
+    def drive(sub: _BaseProblem, a: Array, b: Array, deadline: float) -> tuple[np.ndarray, np.ndarray] | None:
+        seed_ompl(seed)
+        space = _space(ob, sub.lower, sub.upper)
+        limits = robot.base_control_limits()  # (nb,) max |u| of the base controls
+        cspace = oc.RealVectorControlSpace(space, len(limits))
+        cbounds = ob.RealVectorBounds(len(limits))
+        for i, u in enumerate(limits):
+            cbounds.setLow(i, -float(u))
+            cbounds.setHigh(i, float(u))
+        cspace.setBounds(cbounds)
+        ss = oc.SimpleSetup(cspace)
+        nc = len(limits)
+        ss.setStateValidityChecker(lambda s: sub.checker([s[0], s[1], s[2]]))
 
-    ss.setStateValidityChecker(lambda s: problem.is_valid(full(s)))
+        def propagate(s: Any, u: Any, duration: float, result: Any) -> None:
+            q = np.array([s[0], s[1], s[2]])
+            control = np.array([u[i] for i in builtins_range(nc)])
+            steps = max(1, int(round(duration / dt)))
+            for _ in builtins_range(steps):  # Euler at the executor's dt
+                q = robot.propagate_base(q, control, duration / steps)
+            result[0], result[1], result[2] = float(q[0]), float(q[1]), float(q[2])
 
-    def propagate(s: Any, u: Any, duration: float, result: Any) -> None:
-        q = np.array([s[i] for i in builtins_range(nb)])
-        q = robot.propagate_base(q, np.array([u[i] for i in builtins_range(nc)]), duration)
-        for i in builtins_range(nb):
-            result[i] = float(q[i])
+        ss.setStatePropagator(propagate)
+        space.registerDefaultProjection(ob.RealVectorOrthogonalProjectionEvaluator(space, [0, 1]))  # KPIECE, EST
+        si = ss.getSpaceInformation()
+        step = dt * max(1, int(round(propagation_step / dt)))
+        si.setPropagationStepSize(step)
+        shortest = max(1, int(round(min_duration / step)))
+        si.setMinMaxControlDuration(shortest, max(shortest, int(round(max_duration / step))))
+        instance = cls(si)
+        if hasattr(instance, "setGoalBias"):
+            instance.setGoalBias(float(goal_bias))
+        ss.setPlanner(instance)
+        ss.setStartAndGoalStates(_state(space, a), _state(space, b), goal_tolerance)
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0.0:
+            return None
+        status = ss.solve(max(1e-3, remaining * 0.8))  # the rest: the final joint motion and its check
+        if not status or not ss.haveExactSolutionPath():
+            return None
+        solution = ss.getSolutionPath()
+        controls = []
+        for i in builtins_range(solution.getControlCount()):
+            u = [solution.getControl(i)[k] for k in builtins_range(nc)]
+            controls.extend([u] * max(1, int(round(solution.getControlDuration(i) / dt))))
+        base_controls = np.asarray(controls, dtype=float).reshape(-1, nc)
+        rollout = [np.asarray(a, dtype=float)]  # the nominal rollout at dt (what the executor runs)
+        for u in base_controls:
+            rollout.append(robot.propagate_base(rollout[-1], u, dt))
+        rollout = np.asarray(rollout)
+        if not check_path_until(sub, rollout, deadline):  # between the propagation steps too
+            return None
+        if connect and np.linalg.norm(rollout[-1] - b) > 1e-9:  # close the gap with the robot's steering
+            steer_controls, steered = robot.controls_from_path(sub.full_path(np.vstack([rollout[-1], b])))
+            steered = steered[:, sub.base]
+            if len(steer_controls) and check_path_until(sub, sub.motion_path(steered), deadline):
+                rollout = np.vstack([rollout, steered[1:]])
+                base_controls = np.vstack([base_controls, steer_controls[:, :nc]])
+        return rollout, base_controls
 
-    ss.setStatePropagator(propagate)
-    si = ss.getSpaceInformation()
-    si.setPropagationStepSize(dt)
-    si.setMinMaxControlDuration(1, max_steps)
-    si.setStateValidityCheckingResolution(problem.resolution / max(space.getMaximumExtent(), 1e-9))
-    cls = getattr(oc, CONTROL_PLANNERS.get(planner, planner), None)
-    if cls is None:
-        raise ValueError(f"unknown control planner {planner!r} (valid: {', '.join(CONTROL_PLANNERS)})")
-    ss.setPlanner(cls(si))
-    ss.setStartAndGoalStates(_state(space, start[base]), _state(space, goal[base]), goal_tolerance)
-    status = ss.solve(float(time_limit))
-    if not status or not ss.haveExactSolutionPath():
-        return None
-    solution = ss.getSolutionPath()
-    controls = []
-    for i in builtins_range(solution.getControlCount()):
-        u = [solution.getControl(i)[k] for k in builtins_range(nc)]
-        steps = max(1, int(round(solution.getControlDuration(i) / dt)))
-        controls.extend([u] * steps)
-    base_controls = np.asarray(controls, dtype=float)
-    # roll the controls out (this is the nominal trajectory the executor will follow)
-    configs = [start.copy()]
-    for u in base_controls:
-        q = configs[-1].copy()
-        q[base] = robot.propagate_base(q[base], u, dt)
-        configs.append(q)
-    reached = configs[-1]
-    others = [i for i in builtins_range(len(start)) if i not in base]
-    tail = np.vstack([reached, np.concatenate([reached[base], goal[others]])[np.argsort(base + others)]])
-    if others and np.any(np.abs(tail[1] - tail[0]) > 1e-12):
-        if validate_path(problem, tail, margin=None) is not None:
-            sub = plan(problem, tail[0], tail[1], "rrt_connect", time_limit=max(0.5, time_limit / 2), seed=seed)
-            if sub is None:
-                return None
-            tail = sub.path
-        joint_controls, joint_path = robot.controls_from_path(tail)
-        full_controls = np.vstack([robot.base_to_full_controls(base_controls), joint_controls])
-        path = np.vstack([np.asarray(configs), joint_path[1:]])
-    else:
-        full_controls = robot.base_to_full_controls(base_controls)
-        path = np.asarray(configs)
-    if validate_path(problem, path, margin=None) is not None:
-        return None
-    return MotionPlan(
-        path,
-        controls=full_controls,
-        dt=dt,
-        planner=f"kinodynamic_{planner}",
-        planning_time=time.perf_counter() - t0,
-        exact=True,
-        length=path_length(robot, path),
-    )
+    return _mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"kinodynamic_{planner}")
+
+
+def plan_mobile(
+    problem: MotionProblem,
+    start: Array,
+    goal: Array,
+    planner: str = "rrt_connect",
+    time_limit: float = 5.0,
+    seed: int | None = None,
+    tuck: bool = True,
+    simplify: bool = True,
+) -> MotionPlan | None:
+    """Tuck, drive, untuck with an OMPL geometric planner for the base (x, y, theta).
+
+    As :func:`plan_kinodynamic`, but the base path comes from a (bidirectional) geometric
+    planner whose local planner is the robot's own steering: a differential base turns,
+    drives straight and turns (``robot.execution_path``), so every base segment is
+    executable exactly; an omnidirectional base drives the segment. States and motions are
+    checked by :class:`PlanarChecker` every ``problem.resolution`` (L2 of m and rad). The
+    plan's controls follow the path exactly (``robot.controls_from_path``).
+    """
+    robot = problem.robot
+
+    def drive(sub: _BaseProblem, a: Array, b: Array, deadline: float) -> tuple[np.ndarray, np.ndarray] | None:
+        seed_ompl(seed)
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0.0:
+            return None
+        path = _ompl_search(sub, a, b, planner, remaining * 0.8, simplify, 0.0, 1e-6, 1.0, deadline)
+        if path is None:
+            return None
+        controls, rolled = robot.controls_from_path(sub.full_path(path))
+        base = list(robot.base_dofs)
+        return rolled[:, base], controls[:, : robot.n_base_controls]
+
+    return _mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"mobile_{planner}")
+
+
+def control_planner_class(name: str) -> Any:
+    """The ``ompl.control`` planner class for a plugin name (only classes the bindings can build)."""
+    available = control_planner_names()
+    cls_name = CONTROL_PLANNERS.get(name, name)
+    if cls_name not in available.values():
+        raise ValueError(f"unknown or unavailable control planner {name!r} (this OMPL offers: "
+                         f"{', '.join(available)}; ompl 2.0.1's bindings cannot construct SST or PDST)")
+    from ompl import control as oc
+
+    return getattr(oc, cls_name)
+
+
+def control_planner_names() -> dict[str, str]:
+    """Plugin name -> ``ompl.control`` class of the control planners this OMPL can construct."""
+    ob, _, _ = _ompl()
+    from ompl import control as oc
+
+    space = ob.RealVectorStateSpace(1)
+    bounds = ob.RealVectorBounds(1)
+    bounds.setLow(0.0)
+    bounds.setHigh(1.0)
+    space.setBounds(bounds)
+    si = oc.SimpleSetup(oc.RealVectorControlSpace(space, 1)).getSpaceInformation()
+    out = {}
+    for name, cls_name in CONTROL_PLANNERS.items():
+        try:
+            getattr(oc, cls_name)(si)
+        except (AttributeError, TypeError):  # missing, or "no constructor defined" in the bindings
+            continue
+        out[name] = cls_name
+    return out
+
+
+def _wrap_angle(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 # -- scan paths and the NBS rule ---------------------------------------------------------------

@@ -128,6 +128,7 @@ class _BulletRobot(Robot):
         self.parts: list[Part] = []
         self.collider: BulletCollider | None = None
         self._local_points: list[tuple[Part, Points3]] = []
+        self._points_at: dict[float, list[tuple[Part, Points3]]] = {}
         self._com_offset: dict[int, Pose] = {}
         self._state: Array | None = None
 
@@ -161,11 +162,15 @@ class _BulletRobot(Robot):
         return frame_pose(state[4], state[5])
 
     def _sample_part_points(self) -> None:
-        """Points on every part's visual/collision geometry, in the part's link frame."""
-        from explore.bullet import body_visual_meshes  # noqa: F401 - same conventions
+        """Points on every part's geometry (``point_spacing`` apart), in the part's link frame."""
+        self._local_points = self._part_point_sets(self.point_spacing)
+        self._points_at = {float(self.point_spacing): self._local_points}
+
+    def _part_point_sets(self, spacing: float) -> list[tuple[Part, Points3]]:
+        """(part, points in its link frame) on every part's visual geometry and extra meshes."""
         from explore.meshes import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 
-        self._local_points = []
+        sets = []
         for part in self.parts:
             meshes = []
             for shape in p.getVisualShapeData(part.body, physicsClientId=self.client):
@@ -183,24 +188,42 @@ class _BulletRobot(Robot):
                 elif geom in (p.GEOM_CYLINDER, p.GEOM_CAPSULE):
                     meshes.append(cylinder_mesh(dims[1], dims[0]).transformed(link_T_visual))
             meshes.extend(self._extra_meshes(part))
-            points = [_surface_samples(m.vertices, m.triangles, self.point_spacing) for m in meshes]
-            local = np.vstack(points) if points else np.zeros((0, 3))
-            self._local_points.append((part, local))
+            points = [_surface_samples(m.vertices, m.triangles, spacing) for m in meshes]
+            sets.append((part, np.vstack(points) if points else np.zeros((0, 3))))
+        return sets
 
     def _extra_meshes(self, part: Part) -> list:
         """Meshes of parts built without visual shapes (boxes of bases, sensor housing)."""
         return getattr(self, "_part_meshes", {}).get(part, [])
 
-    def link_points(self, q: Array) -> Points3:
-        """(n, 3) points sampled on the robot's surface at ``q`` (for PVS free-space tests)."""
+    def link_points(
+        self, q: Array, within: tuple[Array, Array] | None = None, pad: float = 0.05, spacing: float | None = None
+    ) -> Points3:
+        """(n, 3) points sampled on the robot's surface at ``q`` (for PVS free-space tests).
+
+        With ``within`` = (lo, hi) only the parts whose pybullet AABB, grown by ``pad``
+        (visual and collision shapes differ slightly), overlaps that box contribute: a
+        free-space test of a box (the PVS grid) skips the parts far from it. ``spacing``
+        other than ``point_spacing`` samples (and caches) another point set.
+        """
         if self.sim is None:
             return np.zeros((0, 3))
         self.set_config(q)
+        sets = self._local_points
+        if spacing is not None and float(spacing) != float(self.point_spacing):
+            if float(spacing) not in self._points_at:
+                self._points_at[float(spacing)] = self._part_point_sets(float(spacing))
+            sets = self._points_at[float(spacing)]
         out = []
-        for part, local in self._local_points:
-            if len(local):
-                pose = self.part_pose(part)
-                out.append(local @ pose[:3, :3].T + pose[:3, 3])
+        for part, local in sets:
+            if not len(local):
+                continue
+            if within is not None:
+                lo, hi = p.getAABB(part.body, part.link, physicsClientId=self.client)
+                if any(lo[i] - pad > within[1][i] or hi[i] + pad < within[0][i] for i in range(3)):
+                    continue
+            pose = self.part_pose(part)
+            out.append(local @ pose[:3, :3].T + pose[:3, 3])
         return np.vstack(out) if out else np.zeros((0, 3))
 
     def obstacle_ids(self, world: str) -> list[int]:
@@ -480,7 +503,8 @@ class _BulletRobot(Robot):
         return body, mesh
 
     def _place_housing(self, world_T_sensor: Pose) -> None:
-        center = world_T_sensor @ _pose6([0.0, 0.0, -self.sensor_size[2] / 2.0, 0, 0, 0])
+        center = world_T_sensor.copy()
+        center[:3, 3] -= world_T_sensor[:3, 2] * (self.sensor_size[2] / 2.0)  # housing centre behind the origin
         p.resetBasePositionAndOrientation(
             self._housing, center[:3, 3].tolist(), _quat(center[:3, :3]), physicsClientId=self.client
         )
@@ -550,11 +574,15 @@ class _ArmChain:
             p.changeVisualShape(self.body, j, rgbaColor=[0.9, 0.5, 0.1, 1.0], physicsClientId=client)
 
     def set(self, q: Array) -> None:
+        """Set the joints (the robot's cached configuration is then unknown)."""
         for j, v in zip(self.joints, q, strict=True):
             p.resetJointState(self.body, j, float(v), physicsClientId=self.robot.client)
+        self.robot._state = None
 
-    def flange_pose(self, q: Array) -> Pose:
-        self.set(q)
+    def flange_pose(self, q: Array | None = None) -> Pose:
+        """world_T_flange at joints ``q`` (set first) or at the current joints."""
+        if q is not None:
+            self.set(q)
         state = p.getLinkState(self.body, self.flange, computeForwardKinematics=True, physicsClientId=self.robot.client)
         return frame_pose(state[4], state[5])
 
@@ -667,11 +695,12 @@ class Arm(_BulletRobot):
 
     def _set_state(self, q: Array) -> None:
         self.chain.set(q)
-        self._place_housing(self.chain.flange_pose(q) @ self.flange_T_sensor)
+        self._place_housing(self.chain.flange_pose() @ self.flange_T_sensor)
 
     def fk(self, q: Array) -> Pose:
         """world_T_sensor = world_T_flange(q) (pybullet link state) @ flange_T_sensor (mount)."""
-        return self.chain.flange_pose(np.asarray(q, dtype=float)) @ self.flange_T_sensor
+        self.set_config(q)
+        return self.chain.flange_pose() @ self.flange_T_sensor
 
     def ik(
         self,
@@ -766,6 +795,11 @@ class MobileManipulator(_BulletRobot):
         self._sample_part_points()
         self.q = home
 
+    @property
+    def travel_joints(self) -> Array:
+        """Arm configuration for driving (the ``home`` parameter): the base planners tuck to it."""
+        return np.asarray(self.home, dtype=float)
+
     def _set_state(self, q: Array) -> None:
         world_T_base = _planar(q[0], q[1], q[2])
         p.resetBasePositionAndOrientation(
@@ -779,13 +813,12 @@ class MobileManipulator(_BulletRobot):
             self.chain.body, arm[:3, 3].tolist(), _quat(arm[:3, :3]), physicsClientId=self.client
         )
         self.chain.set(q[3:])
-        self._place_housing(self.chain.flange_pose(q[3:]) @ self.flange_T_sensor)
+        self._place_housing(self.chain.flange_pose() @ self.flange_T_sensor)
 
     def fk(self, q: Array) -> Pose:
         """world_T_sensor: planar base pose, arm mount, pybullet arm FK, sensor mount."""
-        q = np.asarray(q, dtype=float)
         self.set_config(q)
-        return self.chain.flange_pose(q[3:]) @ self.flange_T_sensor
+        return self.chain.flange_pose() @ self.flange_T_sensor
 
     def ik(
         self,
