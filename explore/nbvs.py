@@ -45,7 +45,7 @@ from .motion import (
     Execution,
     MotionPlan,
     MotionProblem,
-    path_is_valid,
+    box_distance,
     path_length,
     truncated_normal,
     truncated_normal_logpdf,
@@ -77,14 +77,6 @@ def samples_needed(alpha: float, eta: float, gamma: float) -> int:
 
 
 # -- obstacles as seen by the planner -------------------------------------------------------
-def _box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
-    """Euclidean distance (n,) from points to the nearest of the boxes [lo_b, hi_b] (0 inside)."""
-    if len(lo) == 0:
-        return np.full(len(points), np.inf)
-    gap = np.maximum(np.maximum(lo[None] - points[:, None], 0.0), points[:, None] - hi[None])  # (n, b, 3)
-    return np.sqrt(np.einsum("nbk,nbk->nb", gap, gap)).min(axis=1)
-
-
 class ObstacleField:
     """Clearance of points from the planning obstacles O = W_obj u W_unk u O_env (Sec. A1).
 
@@ -124,7 +116,7 @@ class ObstacleField:
     def clearance(self, points: Points3) -> Array:
         """(n,) conservative distance from each point to the nearest obstacle (< 0: collision)."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
-        out = _box_distance(points, self.lo, self.hi) - self.box_margin
+        out = box_distance(points, self.lo, self.hi) - self.box_margin
         if self.pvs is not None and len(points):
             pvs = self.pvs
             field_ = self._pvs_field()
@@ -134,7 +126,7 @@ class ObstacleField:
             outside = ~inside
             if outside.any():  # any obstacle voxel lies inside the grid box
                 lo, hi = np.asarray(pvs.min_corner)[None], np.asarray(pvs.max_corner)[None]
-                dist[outside] = _box_distance(points[outside], lo, hi)
+                dist[outside] = box_distance(points[outside], lo, hi)
             out = np.minimum(out, dist)
         return out
 
@@ -201,6 +193,7 @@ class ExpectedUtility:
     utilities: Array = field(default_factory=lambda: np.zeros(0))  # g_i
     weights: Array = field(default_factory=lambda: np.zeros(0))  # eta P_i
     mean: float = 0.0  # plain sample mean of g_i (diagnostic)
+    ess: float = 0.0  # effective sample size 1 / sum w_i^2 of the weights (k for equal weights)
     finals: np.ndarray | None = None  # (k, dof)
     point_checks: int = 0  # sampled states checked point by point (the rest by the bound)
     seconds: float = 0.0
@@ -231,6 +224,7 @@ def expected_utility(
     k: int = 100,
     obstacles: ObstacleField | None = None,
     nominal_points: list[Points3] | None = None,
+    weighting: str = "probability",
 ) -> ExpectedUtility:
     """Algorithm 1: expected utility of ``candidate`` reached by executing ``plan`` k times.
 
@@ -238,8 +232,14 @@ def expected_utility(
     checked state by state against the planning obstacles; ANY colliding state of ANY sample
     makes the candidate infeasible (value 0). Otherwise the utility g(s_i) of each sampled
     final state is weighted by its probability P_i = prod_t p(eps_t) (Eq. 2-3):
-    E(G) = sum_i g_i eta P_i with eta = 1 / sum_i P_i (log-sum-exp; note that with many steps
-    the weights concentrate on the most probable sample; ``mean`` is the plain average).
+    E(G) = sum_i g_i eta P_i with eta = 1 / sum_i P_i (log-sum-exp). ``weighting="mean"``
+    gives every sample the weight 1/k instead (the plain Monte Carlo estimate of E(G): the
+    samples are already drawn from the noise model, so Algorithm 1's weights count their
+    probability twice). ``ess`` = 1 / sum w_i^2 says how many samples the estimate rests on:
+    log P_i sums m x (noisy controls) independent terms -e^2 / (2 sigma^2) - log Z, whose
+    spread grows like sqrt(m x controls / 2) (about 17 for 300 steps of 2 noisy controls),
+    so with the per-``dt`` noise of long plans the probability weights collapse onto a few
+    samples; the paper's control sequences (RRT edges) are short.
 
     Collision test: when the noise moves only the planar base (the paper's setting, arm
     sigma 0), a sample at step t is the nominal state moved by a planar rigid motion, so no
@@ -293,11 +293,16 @@ def expected_utility(
     samples = StateSamples(finals, poses, _weighted_lengths(robot, configs), log_prob)
     g = np.asarray(utility_fn(samples), dtype=float).reshape(k)
     g = np.where(np.isfinite(g), g, 0.0)
-    weights = np.exp(log_prob - log_prob.max())
-    weights /= weights.sum()  # eta P_i
+    if weighting == "probability":
+        weights = np.exp(log_prob - log_prob.max())
+        weights /= weights.sum()  # eta P_i
+    elif weighting == "mean":
+        weights = np.full(k, 1.0 / k)
+    else:
+        raise ValueError(f"weighting must be 'probability' or 'mean', got {weighting!r}")
     result = ExpectedUtility(float(np.sum(g * weights)), True, k, utilities=g, weights=weights,
-                             mean=float(g.mean()), finals=finals, point_checks=checks,
-                             seconds=time.perf_counter() - t0)
+                             mean=float(g.mean()), ess=float(1.0 / np.sum(weights**2)), finals=finals,
+                             point_checks=checks, seconds=time.perf_counter() - t0)
     if hasattr(candidate, "expected"):
         candidate.expected = result
     return result
@@ -372,6 +377,10 @@ class ViewRecord:
     coverage: float = float("nan")
     unknown_voxels: int = 0
     seconds: dict[str, float] = field(default_factory=dict)
+    ess: float | None = None  # effective sample size of the chosen candidate's EU weights
+    plan_attempts: int = 0  # planning queries of this iteration
+    plan_successes: int = 0
+    planning_s: float = 0.0  # their total time
 
 
 def _wrap(angle: float) -> float:
@@ -398,23 +407,32 @@ class NBVSSession:
         Eq. 5-6; any other plugin's score is multiplied by dist of Eq. 7)
     expected : score with the expected utility (EU, Algorithm 1) instead of DU
     k : samples of Algorithm 1
-    n_samples : states sampled per iteration (paper: 10 000 in simulation, 100 000 on the real
-        robot; 40 000 here: only about 1 % of uniform states aim the camera at the region)
+    n_samples : sampled states whose director ray hits the region, per iteration (10 000: the
+        paper's simulation count, read as the issue states it, "10 000 samples whose sensor ray
+        hits the region"; with a mobile manipulator only ~0.8 % of uniform states aim at the
+        bunny, so 10 000 raw draws left ~80 states, ~16 collision-free, and the DU loop stalled
+        at 42 % coverage without noise)
+    max_draws : cap on the uniform draws per iteration
     bases_per_arm : uniform base poses per arm sample (one FK call each, see :meth:`sample`)
     top : candidates kept for motion planning (paper: 25)
     overlap : registration threshold h (paper: 0.5 in simulation)
     resolution : PVS voxel size (paper: 2 cm octree; 1 cm here for a 15 cm bunny)
-    planner, planner_params : motion planner plugin (``rrt_connect``; try_direct on)
+    planner, planner_params : motion planner plugin; default ``tuck_and_drive`` (3 s) for a
+        robot with a base (arm to travel configuration, turn-drive-turn base path, arm to the
+        goal: executable controls, as the paper's kinodynamic RRT gives), else
+        ``rrt_connect`` (1 s, straight segment first)
     beam_stride : every n-th camera beam is simulated for visibility
     noise : execute with the robot's positioning noise (the "-MU" variants)
     min_unknown : candidates must see this many unknown voxels (paper's stop: 30)
+    weighting : "probability" (Algorithm 1: E(G) = sum g_i eta P_i) or "mean" (sample mean)
     """
 
     def __init__(self, sim: Any, registry: Any, utility: str = "area_factor", expected: bool = True,
-                 k: int = 100, n_samples: int = 40000, bases_per_arm: int = 20, top: int = 25, overlap: float = 0.5,
-                 resolution: float = 0.01, planner: str = "rrt_connect", planner_params: dict | None = None,
+                 k: int = 100, n_samples: int = 10000, bases_per_arm: int = 200, top: int = 25, overlap: float = 0.5,
+                 resolution: float = 0.01, planner: str | None = None, planner_params: dict | None = None,
                  max_views: int = 12, seed: int = 0, beam_stride: int = 8, noise: bool = True,
-                 stop_on_collision: bool = True, min_unknown: int = 30, utility_params: dict | None = None) -> None:
+                 stop_on_collision: bool = True, min_unknown: int = 30, utility_params: dict | None = None,
+                 max_draws: int = 3_000_000, weighting: str = "probability") -> None:
         from .metrics import GroundTruthMetrics  # noqa: F401 - fail early if metrics are missing
         from .pvs import PVS
 
@@ -422,13 +440,14 @@ class NBVSSession:
         self.expected, self.k = bool(expected), int(k)
         self.n_samples, self.top, self.overlap = int(n_samples), int(top), float(overlap)
         self.bases_per_arm = max(1, int(bases_per_arm))
+        self.max_draws, self.weighting = int(max_draws), str(weighting)
         self.max_views, self.seed, self.noise = int(max_views), int(seed), bool(noise)
         self.stop_on_collision, self.min_unknown = bool(stop_on_collision), int(min_unknown)
         self.region_min = np.asarray(sim.spec.region_min, dtype=float)
         self.region_max = np.asarray(sim.spec.region_max, dtype=float)
         self.pvs = PVS.for_region(self.region_min, self.region_max, resolution)
         self.obstacles = ObstacleField.from_sim(sim, self.pvs)
-        self.problem = MotionProblem(self.robot, space_free=self._space_free)
+        self.problem = MotionProblem(self.robot, space_free=self.pvs.is_free)
         view_params = {"beam_stride": int(beam_stride), "overlap": self.overlap}
         self.visibility = registry.create("utility", "area_factor", view_params, "<nbvs>")
         self.utility_name = utility
@@ -436,8 +455,12 @@ class NBVSSession:
             self.utility = self.visibility
         else:
             self.utility = registry.create("utility", utility, utility_params or {}, "<nbvs>")
-        params = {"time_limit": 1.0, "try_direct": True, **(planner_params or {})}
-        self.planner = registry.create("motion_planner", planner, params, "<nbvs>")
+        if planner is None:
+            planner = "tuck_and_drive" if self.robot.base_dofs else "rrt_connect"
+        defaults: dict[str, Any] = {"time_limit": 3.0} if planner == "tuck_and_drive" else \
+            {"time_limit": 1.0, "try_direct": True} if planner != "kinodynamic" else {}
+        self.planner_name = planner
+        self.planner = registry.create("motion_planner", planner, {**defaults, **(planner_params or {})}, "<nbvs>")
         rng = np.random.default_rng(seed)
         self.rng_sample, self.rng_eu, self.rng_exec, self.rng_sensor = (
             np.random.default_rng(rng.integers(2**63)) for _ in range(4))
@@ -451,6 +474,7 @@ class NBVSSession:
         self.records: list[ViewRecord] = []
         self.stages: dict[str, int] = {}
         self.executions: list[Execution] = []
+        self.plan_log: list[tuple[float, bool]] = []  # (seconds, success) of every planning query
         self.status, self.reason = "running", ""
         self._gt: Any = None
 
@@ -463,15 +487,6 @@ class NBVSSession:
         grid.ensure_features()
         return grid
 
-    def _space_free(self, points: Points3) -> np.ndarray:
-        """``pvs.is_free`` for the points inside the grid box (outside is free): a cheap pre-filter."""
-        lo, hi = np.asarray(self.pvs.min_corner), np.asarray(self.pvs.max_corner)
-        inside = np.all((points >= lo) & (points <= hi), axis=1)
-        out = np.ones(len(points), dtype=bool)
-        if inside.any():
-            out[inside] = self.pvs.is_free(points[inside])
-        return out
-
     def coverage(self) -> float:
         """Ground-truth coverage c_a (tau 3 mm) of every point measured so far (metrics only)."""
         from .metrics import GroundTruthMetrics
@@ -482,23 +497,13 @@ class NBVSSession:
             return 0.0
         return float(self._gt.coverage(np.vstack(self.points)))
 
-    def _ray_hits(self, poses: np.ndarray) -> np.ndarray:
-        """Director ray (optical axis) of each pose hits the region box within range (slab test)."""
-        o, d = poses[:, :3, 3], poses[:, :3, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / np.where(np.abs(d) < 1e-12, 1e-12, d)
-            t1, t2 = (self.region_min - o) * inv, (self.region_max - o) * inv
-        near = np.minimum(t1, t2).max(axis=1)
-        far = np.maximum(t1, t2).min(axis=1)
-        return (far >= np.maximum(near, 0.0)) & (near <= float(self.sensor.max_range))
-
     # -- steps -------------------------------------------------------------------------------
-    def initial(self, attempts: int = 3000) -> ViewRecord:
-        """First scan from an arbitrary, exactly known state (Sec. A2 step 1).
+    def first_view(self, attempts: int = 3000) -> Pose:
+        """The first, exactly known state (Sec. A2 step 1): no motion; its sensor pose.
 
         The start base is kept; arm configurations are sampled and the one whose optical axis
         points most directly at the region centre from 0.4-1.2 m (and is collision-free in
-        the known environment) is taken without a motion.
+        the known environment and the all-unknown PVS) is taken.
         """
         robot, q0 = self.robot, self.q.copy()
         centre = 0.5 * (self.region_min + self.region_max)
@@ -519,46 +524,76 @@ class NBVSSession:
         self.q = best_q
         robot.q = best_q.copy()
         robot.set_config(best_q)
+        return robot.fk(best_q)
+
+    def initial(self, attempts: int = 3000) -> ViewRecord:
+        """First scan from the first state (:meth:`first_view`)."""
         record = ViewRecord(0, {}, 0.0, 0.0, None, 1.0, 0.0, 0, False, [])
-        self.scan(robot.fk(best_q), record)
+        self.scan(self.first_view(attempts), record)
         self.records.append(record)
         return record
 
     def sample(self) -> list[ViewState]:
-        """``n_samples`` uniform states; keep those whose director ray hits the region (Sec. A8.1).
+        """Uniform states until ``n_samples`` of them aim the director ray at the region (Sec. A8.1).
 
-        For a planar base the sensor pose is world_T_base(x, y, theta) @ fk(0, 0, 0, arm), so
-        each FK call of an arm sample serves ``bases_per_arm`` uniform base samples (every
-        state is still uniform in the state space; groups share their arm joints).
+        States are drawn uniformly in the state space (joint limits, heading in [-pi, pi));
+        a state is kept if the sensor's optical axis hits the region box within range, until
+        ``n_samples`` are kept or ``max_draws`` were drawn (``stages['sampled']`` counts the
+        draws, ``stages['ray_hits']`` the kept). For a planar base the sensor pose is
+        world_T_base(x, y, theta) @ fk(0, 0, 0, arm), so each FK call of an arm sample serves
+        ``bases_per_arm`` uniform base samples (every state is still uniform in the state
+        space; a group shares its arm joints), and an arm whose ray never reaches the region's
+        height band within range is rejected with all its base samples (counted as drawn).
         """
         robot = self.robot
         lo, hi = np.asarray(robot.lower, dtype=float).copy(), np.asarray(robot.upper, dtype=float).copy()
         base = list(robot.base_dofs)
         if base:
             lo[base[2]], hi[base[2]] = -math.pi, math.pi
-        qs = self.rng_sample.uniform(lo, hi, size=(self.n_samples, len(lo)))
-        if base and self.bases_per_arm > 1:
-            group = np.arange(self.n_samples) // self.bases_per_arm
-            first = np.flatnonzero(np.diff(np.concatenate([[-1], group])) > 0)
-            joints = robot.joint_dofs
-            qs[:, joints] = qs[first[group]][:, joints]
-            local = []
-            for index in first:
-                ref = qs[index].copy()
-                ref[base] = 0.0
-                local.append(robot.fk(ref))
-            base_T_sensor = np.asarray(local)[group]
-            x, y, th = qs[:, base[0]], qs[:, base[1]], qs[:, base[2]]
-            world_T_base = np.tile(np.eye(4), (self.n_samples, 1, 1))
-            c, s = np.cos(th), np.sin(th)
-            world_T_base[:, 0, 0], world_T_base[:, 0, 1], world_T_base[:, 1, 0], world_T_base[:, 1, 1] = c, -s, s, c
-            world_T_base[:, 0, 3], world_T_base[:, 1, 3] = x, y
-            poses = world_T_base @ base_T_sensor
-        else:
-            poses = np.array([robot.fk(q) for q in qs])
-        keep = self._ray_hits(poses)
-        self.stages = {"sampled": self.n_samples, "ray_hits": int(keep.sum())}
-        return [ViewState(q, pose) for q, pose in zip(qs[keep], poses[keep], strict=True)]
+        rng = self.rng_sample
+        kept_q: list[np.ndarray] = []
+        kept_pose: list[np.ndarray] = []
+        drawn, kept = 0, 0
+        while kept < self.n_samples and drawn < self.max_draws:
+            if base:
+                group, arms = self.bases_per_arm, 64
+                qs = rng.uniform(lo, hi, size=(arms, len(lo)))
+                refs = qs.copy()
+                refs[:, base] = 0.0
+                local = np.array([robot.fk(q) for q in refs])  # base_T_sensor of each arm sample
+                drawn += arms * group
+                alive = np.flatnonzero(self._may_hit_slab(local[:, :3, 3], local[:, :3, 2]))
+                if len(alive) == 0:
+                    continue
+                arm = np.repeat(alive, group)
+                states = qs[arm]
+                states[:, base] = rng.uniform(lo[base], hi[base], size=(len(arm), 3))
+                x, y, th = states[:, base[0]], states[:, base[1]], states[:, base[2]]
+                c, s = np.cos(th)[:, None], np.sin(th)[:, None]
+                o_b, d_b = local[arm, :3, 3], local[arm, :3, 2]
+                origins = np.column_stack([c[:, 0] * o_b[:, 0] - s[:, 0] * o_b[:, 1] + x,
+                                           s[:, 0] * o_b[:, 0] + c[:, 0] * o_b[:, 1] + y, o_b[:, 2]])
+                directions = np.column_stack([c[:, 0] * d_b[:, 0] - s[:, 0] * d_b[:, 1],
+                                              s[:, 0] * d_b[:, 0] + c[:, 0] * d_b[:, 1], d_b[:, 2]])
+                hit = np.flatnonzero(self._ray_hits(origins, directions))
+                for index in hit:
+                    world_T_base = np.eye(4)
+                    world_T_base[:2, :2] = [[c[index, 0], -s[index, 0]], [s[index, 0], c[index, 0]]]
+                    world_T_base[:2, 3] = x[index], y[index]
+                    kept_q.append(states[index])
+                    kept_pose.append(world_T_base @ local[arm[index]])
+            else:
+                batch = 256
+                qs = rng.uniform(lo, hi, size=(batch, len(lo)))
+                poses = np.array([robot.fk(q) for q in qs])
+                drawn += batch
+                for index in np.flatnonzero(self._ray_hits(poses[:, :3, 3], poses[:, :3, 2])):
+                    kept_q.append(qs[index])
+                    kept_pose.append(poses[index])
+            kept = len(kept_q)
+        kept_q, kept_pose = kept_q[: self.n_samples], kept_pose[: self.n_samples]
+        self.stages = {"sampled": drawn, "ray_hits": len(kept_q)}
+        return [ViewState(q, pose) for q, pose in zip(kept_q, kept_pose, strict=True)]
 
     def filter(self, states: list[ViewState]) -> list[ViewState]:
         """Collision -> visibility -> registration (h) -> surface -> top ``top`` by sur.
@@ -586,11 +621,14 @@ class NBVSSession:
         return ranked
 
     def plan(self, states: list[ViewState]) -> list[ViewState]:
-        """Plan from the current state to each candidate; keep those with a valid nominal motion.
+        """Plan from the current state to each candidate; keep those with a motion (pos = 1).
 
-        The geometric path becomes per-``dt`` velocity controls (``controls_from_path``: a
-        differential base turns, drives, turns); every state of their noise-free rollout is
-        checked again (pos = 1 needs the executed nominal motion to be collision-free).
+        Every planner checks the motion as the robot executes it (a differential base turns,
+        drives and turns; the kinodynamic and tuck-and-drive planners check their control
+        rollout), so the noise-free execution of the controls is collision-free. A geometric
+        path becomes per-``dt`` velocity controls (``controls_from_path``); planners that
+        return controls keep them (their final state may differ from the candidate's: DU and
+        EU score the state the controls reach).
         """
         robot, out = self.robot, []
         for index, s in enumerate(states):
@@ -600,11 +638,16 @@ class NBVSSession:
                 goal[th] = self.q[th] + _wrap(goal[th] - self.q[th])
                 if not robot.lower[th] <= goal[th] <= robot.upper[th]:
                     continue
+            t0 = time.perf_counter()
             plan = self.planner.plan(self.problem, self.q, goal, seed=self.plan_seed + index)
+            self.plan_log.append((time.perf_counter() - t0, plan is not None))
             if plan is None:
                 continue
-            controls, nominal = robot.controls_from_path(plan.path)
-            if len(controls) == 0 or not path_is_valid(self.problem, nominal, resolution=np.inf, margin=None):
+            if plan.controls is not None:
+                controls, nominal = np.asarray(plan.controls), np.asarray(plan.path)
+            else:
+                controls, nominal = robot.controls_from_path(plan.path)
+            if len(controls) == 0:
                 continue
             s.plan = MotionPlan(nominal, controls=controls, dt=float(robot.dt), planner=plan.planner,
                                 planning_time=plan.planning_time, length=path_length(robot, nominal))
@@ -633,7 +676,8 @@ class NBVSSession:
             nominal = StateSamples(final[None], robot.fk(final)[None], np.array([s.length]), np.zeros(1))
             s.deterministic = float(self.utility_at(nominal)[0])
             if self.expected:
-                s.expected = expected_utility(s, self.utility_at, robot, s.plan, self.rng_eu, self.k, self.obstacles)
+                s.expected = expected_utility(s, self.utility_at, robot, s.plan, self.rng_eu, self.k, self.obstacles,
+                                              weighting=self.weighting)
                 s.score = s.expected.value if s.expected.feasible else 0.0
             else:
                 s.score = s.deterministic
@@ -653,12 +697,15 @@ class NBVSSession:
         self.q = np.asarray(run.final, dtype=float).copy()
         return run
 
-    def scan(self, pose: Pose, record: ViewRecord) -> None:
-        """Acquire at the executed sensor pose, integrate the PVS, measure coverage."""
-        scan = self.sensor.acquire(self.sim, pose, self.rng_sensor)
+    def acquire(self, pose: Pose) -> Any:
+        """A scan from the world's sensor at the executed sensor pose."""
+        return self.sensor.acquire(self.sim, pose, self.rng_sensor)
+
+    def integrate(self, scan: Any, record: ViewRecord) -> None:
+        """Integrate a scan into the PVS, keep its points in the region, measure coverage."""
         self.pvs.integrate(scan)
         self.ctx.grid = self._snapshot()
-        self.ctx.sensor_pose = np.asarray(pose).copy()
+        self.ctx.sensor_pose = np.asarray(scan.sensor_poses[0]).copy()
         self.ctx.iteration += 1
         points = scan.points()
         inside = np.all((points >= self.region_min - 0.01) & (points <= self.region_max + 0.01), axis=1)
@@ -666,49 +713,68 @@ class NBVSSession:
         record.coverage = self.coverage()
         record.unknown_voxels = int(self.pvs.counts("vasquez")["unknown"])
 
-    def step(self) -> ViewRecord | None:
-        """One NBVS iteration; None when the run has finished."""
-        if self.status != "running":
-            return None
-        if not self.records:
-            return self.initial()
-        if len(self.records) > self.max_views:
+    def scan(self, pose: Pose, record: ViewRecord) -> None:
+        """Acquire at the executed sensor pose, integrate the PVS, measure coverage."""
+        self.integrate(self.acquire(pose), record)
+
+    def finished(self) -> bool:
+        """True once the run has stopped (after ``max_views`` planned views, a stop or a collision)."""
+        if self.status == "running" and len(self.records) > self.max_views:
             self.status, self.reason = "stopped", f"max_views = {self.max_views} reached"
-            return None
-        times: dict[str, float] = {}
-        t = time.perf_counter()
-        states = self.sample()
-        times["sample"] = time.perf_counter() - t
-        t = time.perf_counter()
-        states = self.filter(states)
-        times["filter"] = time.perf_counter() - t
-        t = time.perf_counter()
-        states = self.plan(states)
-        times["plan"] = time.perf_counter() - t
-        t = time.perf_counter()
-        states = self.score(states)
-        times["score"] = time.perf_counter() - t
-        best = self.select(states)
+        return self.status != "running"
+
+    def no_candidate(self) -> None:
+        """Stop: no view/state survived (the paper's stop when no path is found to any candidate)."""
         for name in STAGES:
             self.stages.setdefault(name, 0)
-        if best is None:
-            empty = next((name for name in STAGES if self.stages[name] == 0), "feasible")
-            self.status, self.reason = "stopped", f"no view/state left after the {empty!r} stage"
-            return None
-        t = time.perf_counter()
+        empty = next((name for name in STAGES if self.stages[name] == 0), "feasible")
+        self.status, self.reason = "stopped", f"no view/state left after the {empty!r} stage"
+
+    def move(self, best: ViewState, states: list[ViewState], since: int) -> tuple[Execution, ViewRecord]:
+        """Execute the chosen view/state; the iteration's record (planning queries from ``since``).
+
+        A collision (TRUE world) ends the run when ``stop_on_collision``; the record then gets
+        the coverage so far and no scan.
+        """
         run = self.execute(best)
         feasible = [s for s in states if s.expected is not None and s.expected.feasible]
+        queries = self.plan_log[since:]
         record = ViewRecord(
             index=len(self.records), stages=dict(self.stages), score=best.score, deterministic=best.deterministic,
             expected=None if best.expected is None else best.expected.value,
             feasible_share=len(feasible) / max(1, len(states)) if self.expected else 1.0,
             path_length=best.length, steps=len(best.plan.controls) if best.plan is not None else 0,
             collided=run.collided, collisions=[e.bodies for e in run.collisions],
+            ess=None if best.expected is None else best.expected.ess,
+            plan_attempts=len(queries), plan_successes=sum(ok for _, ok in queries),
+            planning_s=float(sum(t for t, _ in queries)),
         )
         if run.collided and self.stop_on_collision:
             record.coverage = self.coverage()
             self.status, self.reason = "collided", f"collision with {', '.join(run.collisions[0].bodies)}"
-        else:
+        return run, record
+
+    def step(self) -> ViewRecord | None:
+        """One NBVS iteration; None when the run has finished."""
+        if self.finished():
+            return None
+        if not self.records:
+            return self.initial()
+        times: dict[str, float] = {}
+        since = len(self.plan_log)
+        states: Any = None
+        for name, stage in (("sample", lambda _: self.sample()), ("filter", self.filter), ("plan", self.plan),
+                            ("score", self.score)):
+            t = time.perf_counter()
+            states = stage(states)
+            times[name] = time.perf_counter() - t
+        best = self.select(states)
+        if best is None:
+            self.no_candidate()
+            return None
+        t = time.perf_counter()
+        run, record = self.move(best, states, since)
+        if self.status == "running":
             self.scan(run.sensor_pose, record)
         times["execute_scan"] = time.perf_counter() - t
         record.seconds = times
@@ -724,6 +790,43 @@ class NBVSSession:
             if progress is not None:
                 progress(record)
         return self.summary()
+
+    def save_trajectories_png(self, path: Any, title: str = "") -> None:
+        """Top view: known environment, region, the executed motions (base, or sensor without a
+        base), the sensor at every scan and the collisions (red crosses)."""
+        from .pictures import plt
+
+        fig, ax = plt.subplots(figsize=(6.5, 6), dpi=110)
+        for body in self.sim.bodies:
+            lo, hi = np.asarray(body.mesh.bounds[0]), np.asarray(body.mesh.bounds[1])
+            if hi[2] < 1e-3:
+                continue  # the floor
+            color = "tab:orange" if body.is_object else "0.6"
+            ax.add_patch(plt.Rectangle(lo[:2], *(hi - lo)[:2], color=color, alpha=0.5, lw=0))
+        rlo, rhi = self.region_min, self.region_max
+        ax.add_patch(plt.Rectangle(rlo[:2], *(rhi - rlo)[:2], fill=False, ls="--", color="tab:green"))
+        base = list(self.robot.base_dofs)
+        for run in self.executions:
+            if base:
+                xy = run.configs[:, base[:2]]
+            else:
+                xy = np.array([self.robot.fk(q)[:2, 3] for q in run.configs[:: max(1, len(run.configs) // 50)]])
+            ax.plot(xy[:, 0], xy[:, 1], lw=1.2, color="tab:blue", alpha=0.8)
+            for event in run.collisions:
+                q = event.config
+                at = q[base[:2]] if base else self.robot.fk(q)[:2, 3]
+                ax.plot(*at, "x", color="red", ms=10, mew=2)
+        scans = [r for r in self.records if np.isfinite(r.coverage)]
+        if self.ctx.sensor_pose is not None and scans:
+            ax.plot(*self.ctx.sensor_pose[:2, 3], "^", color="k", ms=6, label="last scan")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_title(title or f"{len(self.executions)} motions")
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(path)
+        plt.close(fig)
 
     def summary(self) -> dict[str, Any]:
         """Coverage per view (the first entry is the initial scan), collisions, stop reason."""
@@ -744,6 +847,12 @@ class NBVSSession:
             "status": self.status,
             "reason": self.reason,
             "stages": [r.stages for r in moves],
+            "path_lengths": [r.path_length for r in moves],
+            "ess": [r.ess for r in moves],
+            "plan_attempts": len(self.plan_log),
+            "plan_success_rate": sum(ok for _, ok in self.plan_log) / max(1, len(self.plan_log)),
+            "planning_s_median": float(np.median([t for t, _ in self.plan_log])) if self.plan_log else None,
+            "planner": self.planner_name,
         }
 
 
