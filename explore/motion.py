@@ -72,10 +72,12 @@ def truncated_normal(rng: np.random.Generator, sigma: Array, size: int, beta: fl
     return out
 
 
-def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0) -> float:
+def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0,
+                            active: np.ndarray | None = None) -> float:
     """Sum of log densities of the truncated normal errors (log of Eq. 2 / Eq. 3 products).
 
-    Dimensions with sigma = 0 (noise-free) contribute nothing.
+    Dimensions with sigma = 0 (noise-free) contribute nothing, nor do the entries that
+    ``active`` (same shape as ``eps``) marks as not sampled (a control that commands no motion).
     """
     sigma = np.asarray(sigma, dtype=float)
     use = sigma > 0
@@ -84,6 +86,8 @@ def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0) ->
     e, s = np.asarray(eps)[:, use], sigma[use]
     mass = math.erf(beta / math.sqrt(2.0))  # P(-beta sigma <= e <= beta sigma) = 0.997 for beta 3
     logpdf = -0.5 * (e / s) ** 2 - np.log(s * math.sqrt(2.0 * math.pi)) - math.log(mass)
+    if active is not None:
+        logpdf = np.where(np.asarray(active, dtype=bool)[:, use], logpdf, 0.0)
     return float(logpdf.sum())
 
 
@@ -178,6 +182,8 @@ class BulletCollider:
         # integer indices of the parts (a frozen dataclass hashes slowly in the inner loop)
         index = {part: i for i, part in enumerate(self.parts)}
         self._pair_index = [(index.get(a, -1), index.get(b, -1)) for a, b in self.self_pairs]
+        self._pair_a = np.array([i for i, _ in self._pair_index], dtype=np.int64)
+        self._pair_b = np.array([j for _, j in self._pair_index], dtype=np.int64)
         self._ignore_index = {(index[part], body) for part, body in self.ignore if part in index}
 
     def obstacle_aabbs(self, bodies: Sequence[int]) -> list[tuple[int, tuple, tuple]]:
@@ -193,29 +199,35 @@ class BulletCollider:
     def collides(self, obstacles: Sequence[int], margin: float = 0.0, self_check: bool = True) -> list[int]:
         """Obstacle body ids (and -1 for self-collision) within ``margin`` of the robot.
 
-        Plain-Python AABB overlap tests (numpy calls on 3-vectors cost more than the test)
+        AABB overlap tests (one numpy comparison of every part box with every obstacle box)
         prune both the obstacle and the self-collision pairs before ``getClosestPoints``.
         """
         p, c = self.p, self.client
         hits: list[int] = []
         boxes = self.obstacle_aabbs(obstacles)
-        ignore = self._ignore_index
-        part_boxes: list[tuple] = []
-        for i, part in enumerate(self.parts):
-            lo, hi = p.getAABB(part.body, part.link, physicsClientId=c)
-            part_boxes.append((lo, hi))
-            for body, blo, bhi in boxes:
-                if body in hits or (ignore and (i, body) in ignore):
+        part_boxes = np.array([[*lo, *hi] for lo, hi in (p.getAABB(part.body, part.link, physicsClientId=c)
+                                                         for part in self.parts)]).reshape(-1, 6)
+        if boxes:
+            ids = [body for body, _, _ in boxes]
+            obstacle_boxes = np.array([[*lo, *hi] for _, lo, hi in boxes])
+            near = np.all(part_boxes[:, None, :3] - margin <= obstacle_boxes[None, :, 3:], axis=2) & \
+                np.all(part_boxes[:, None, 3:] + margin >= obstacle_boxes[None, :, :3], axis=2)
+            for i, j in zip(*np.nonzero(near), strict=True):
+                body = ids[j]
+                if body in hits or (self._ignore_index and (int(i), body) in self._ignore_index):
                     continue
-                if not _overlap(lo, hi, blo, bhi, margin):
-                    continue
+                part = self.parts[i]
                 points = p.getClosestPoints(part.body, body, margin, linkIndexA=part.link, physicsClientId=c)
                 if points and min(pt[8] for pt in points) < margin:
                     hits.append(body)
-        if self_check:
-            for (a, b), (ia, ib) in zip(self.self_pairs, self._pair_index, strict=True):
-                if ia >= 0 and ib >= 0 and not _overlap(*part_boxes[ia], *part_boxes[ib], 0.0):
-                    continue  # disjoint boxes cannot penetrate
+        if self_check and self.self_pairs:
+            ia, ib = self._pair_a, self._pair_b
+            known = (ia >= 0) & (ib >= 0)
+            a_box, b_box = part_boxes[np.where(known, ia, 0)], part_boxes[np.where(known, ib, 0)]
+            touching = ~known | (np.all(a_box[:, :3] <= b_box[:, 3:], axis=1) & np.all(a_box[:, 3:] >= b_box[:, :3],
+                                                                                     axis=1))
+            for index in np.flatnonzero(touching):  # disjoint boxes cannot penetrate
+                a, b = self.self_pairs[index]
                 points = p.getClosestPoints(
                     a.body, b.body, 0.0, linkIndexA=a.link, linkIndexB=b.link, physicsClientId=c
                 )
@@ -223,15 +235,6 @@ class BulletCollider:
                     hits.append(-1)
                     break
         return hits
-
-
-def _overlap(lo: Sequence[float], hi: Sequence[float], blo: Sequence[float], bhi: Sequence[float],
-             margin: float) -> bool:
-    """True if box [lo, hi] grown by ``margin`` overlaps box [blo, bhi]."""
-    return not (
-        lo[0] - margin > bhi[0] or lo[1] - margin > bhi[1] or lo[2] - margin > bhi[2]
-        or hi[0] + margin < blo[0] or hi[1] + margin < blo[1] or hi[2] + margin < blo[2]
-    )
 
 
 def self_collision_pairs(
@@ -280,6 +283,7 @@ class MotionProblem:
         self.checks = 0
         self.space_bounds = space_bounds if space_bounds is not None else _free_outside_box(space_free)
         self.pins: dict[int, float] = {}
+        self.motions: dict[tuple, np.ndarray] = {}  # joint motions found (see cache_key)
 
     @property
     def lower(self) -> Array:
@@ -295,10 +299,26 @@ class MotionProblem:
             upper[index] = value
         return upper
 
+    def cache_key(self, a: Array, b: Array) -> tuple | None:
+        """Key of a motion a -> b valid while the free space does not change (None: no caching).
+
+        Without ``space_free`` the known environment is static; ``pvs.is_free`` carries the
+        PVS version; any other free-space test cannot be cached.
+        """
+        if self.space_free is None:
+            version: Any = "static"
+        else:
+            version = getattr(getattr(self.space_free, "__self__", None), "version", None)
+            if version is None:
+                return None
+        return (np.asarray(a, dtype=float).tobytes(), np.asarray(b, dtype=float).tobytes(), version,
+                tuple(sorted(self.pins.items())))
+
     def pinned(self, dofs: Sequence[int], q: Array) -> MotionProblem:
         """The same problem with the joints ``dofs`` held at their values in ``q`` (e.g. the base)."""
         out = MotionProblem(self.robot, self.space_free, self.margin, self.resolution, self.space_bounds)
         out.pins = {**self.pins, **{int(i): float(q[i]) for i in dofs}}
+        out.motions = self.motions
         return out
 
     def is_valid(self, q: Array, margin: float | None = None) -> bool:
@@ -752,18 +772,31 @@ class _BaseProblem:
 
 
 def _joint_motion(problem: MotionProblem, a: Array, b: Array, deadline: float, seed: int | None) -> np.ndarray | None:
-    """Path moving only the non-base joints from ``a`` to ``b`` (straight if valid, else RRT-Connect)."""
+    """Path moving only the non-base joints from ``a`` to ``b`` (straight if valid, else RRT-Connect).
+
+    Found motions are remembered by the problem while its free space is unchanged (the tuck
+    from the current state is the same for every candidate of an NBV iteration).
+    """
     if not np.any(np.abs(np.asarray(b) - np.asarray(a)) > 1e-12):
         return np.vstack([a]).astype(float)
+    key = problem.cache_key(a, b)
+    if key is not None and key in problem.motions:
+        return problem.motions[key]
     path = np.vstack([a, b]).astype(float)
     verdict = check_path_until(problem, path, deadline, margin=None)
-    if verdict:
-        return path
     if verdict is None:
         return None
-    pinned = problem.pinned(list(problem.robot.base_dofs), a)
-    sub = plan(pinned, a, b, "rrt_connect", time_limit=max(0.0, deadline - time.perf_counter()), seed=seed)
-    return None if sub is None else sub.path
+    if not verdict:
+        pinned = problem.pinned(list(problem.robot.base_dofs), a)
+        sub = plan(pinned, a, b, "rrt_connect", time_limit=max(0.0, deadline - time.perf_counter()), seed=seed)
+        if sub is None:
+            return None
+        path = sub.path
+    if key is not None:
+        if len(problem.motions) > 512:  # older free-space versions
+            problem.motions.clear()
+        problem.motions[key] = path
+    return path
 
 
 def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: bool) -> list[Array]:

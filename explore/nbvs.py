@@ -113,6 +113,14 @@ class ObstacleField:
             self._version = version
         return self._field
 
+    def kernel_field(self) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+        """PVS distance field, lattice, voxel size and grid box for numba kernels (empty without a PVS)."""
+        if self.pvs is None:
+            return np.zeros((0, 0, 0)), np.zeros(3, dtype=np.int64), 1.0, np.zeros(3), np.zeros(3)
+        return (np.ascontiguousarray(self._pvs_field()), np.asarray(self.pvs.lattice, dtype=np.int64),
+                float(self.pvs.resolution), np.asarray(self.pvs.min_corner, dtype=float),
+                np.asarray(self.pvs.max_corner, dtype=float))
+
     def clearance(self, points: Points3) -> Array:
         """(n,) conservative distance from each point to the nearest obstacle (< 0: collision)."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
@@ -223,7 +231,6 @@ def expected_utility(
     rng: np.random.Generator,
     k: int = 100,
     obstacles: ObstacleField | None = None,
-    nominal_points: list[Points3] | None = None,
     weighting: str = "probability",
 ) -> ExpectedUtility:
     """Algorithm 1: expected utility of ``candidate`` reached by executing ``plan`` k times.
@@ -245,10 +252,10 @@ def expected_utility(
     sigma 0), a sample at step t is the nominal state moved by a planar rigid motion, so no
     robot point moves more than |dc| + R_t |dtheta| (R_t: largest horizontal distance of the
     nominal robot points from the base axis). Samples whose bound stays below the nominal
-    clearance are safe; the others are tested exactly on the moved surface points. With joint
-    noise every sampled state is tested on its own points (slow). ``obstacles`` defaults to the
-    known environment of ``robot.sim``; ``nominal_points`` (robot points per nominal step) may
-    be passed to reuse them across calls.
+    clearance are safe; the others are tested exactly on the moved surface points (numba,
+    :func:`explore.motion_kernels.rigid_step_hit`; the points in the base frame are sampled
+    once per arm configuration). With joint noise every sampled state is tested on its own
+    points (slow). ``obstacles`` defaults to the known environment of ``robot.sim``.
     """
     t0 = time.perf_counter()
     k = int(k)
@@ -263,18 +270,25 @@ def expected_utility(
     m = len(controls)
     eps = truncated_normal(rng, sigma, k * m, beta).reshape(k, m, len(sigma)) if m else np.zeros((k, 0, len(sigma)))
     eps[:, :, sigma <= 0] = 0.0
-    log_prob = np.array([truncated_normal_logpdf(eps[i], sigma, beta) for i in range(k)])
+    mask = getattr(robot, "noise_mask", None)
+    active = np.ones((m, len(sigma)), dtype=bool) if mask is None else np.asarray(mask(controls), dtype=bool)
+    eps *= active[None]  # no error on the controls of parts commanded to stand still
+    log_prob = np.array([truncated_normal_logpdf(eps[i], sigma, beta, active) for i in range(k)])
     configs = rollout_batch(robot, start, controls, eps)
     nominal = rollout_batch(robot, start, controls, np.zeros((1, m, len(sigma))))[0]
     base = list(getattr(robot, "base_dofs", ()))
     joints = list(robot.joint_dofs)
     rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
     checks = 0
-    if nominal_points is None:
-        nominal_points = [robot.link_points(q) for q in nominal]
+    local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration
     for t in range(m, 0, -1):  # collisions are likeliest late (largest drift, goal near the object)
         if rigid:
-            hit, n = _rigid_step_collision(configs[:, t], nominal[t], nominal_points[t], base, obstacles)
+            key = nominal[t][joints].tobytes()
+            if key not in local_points:
+                ref = nominal[t].copy()
+                ref[base] = 0.0
+                local_points[key] = np.ascontiguousarray(robot.link_points(ref))
+            hit, n = _rigid_step_collision(configs[:, t], nominal[t], local_points[key], base, obstacles)
         elif joints and not np.any(sigma > 0):
             hit, n = None, 0  # noise-free: every sample is the (validated) nominal
         else:
@@ -308,35 +322,23 @@ def expected_utility(
     return result
 
 
-def _rigid_step_collision(states: np.ndarray, nominal: Array, points: Points3, base: list[int],
-                          obstacles: ObstacleField, chunk: int = 64) -> tuple[int | None, int]:
-    """First sample (index) whose planar-moved robot points hit an obstacle at one step."""
-    if len(points) == 0:
+def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, base: list[int],
+                          obstacles: ObstacleField) -> tuple[int | None, int]:
+    """First sample (index) whose planar-moved robot hits an obstacle at one step; samples tested.
+
+    ``local``: robot points in the base frame at this step's arm configuration.
+    """
+    from .motion_kernels import rigid_step_hit
+
+    if len(local) == 0:
         return None, 0
     ix, iy, ith = base
-    clear = obstacles.clearance(points)
-    centre = nominal[[ix, iy]]
-    rel = points[:, :2] - centre
-    radius = float(np.sqrt((rel * rel).sum(axis=1)).max())
-    d_theta = states[:, ith] - nominal[ith]
-    shift = states[:, [ix, iy]] - centre
-    bound = np.hypot(shift[:, 0], shift[:, 1]) + radius * np.abs(d_theta)
-    need = np.flatnonzero(bound >= clear.min())
-    if len(need) == 0:
-        return None, 0
-    near = clear < bound[need].max()
-    rel_near, z_near = rel[near], points[near, 2]
-    for lo in range(0, len(need), chunk):
-        idx = need[lo : lo + chunk]
-        c, s = np.cos(d_theta[idx]), np.sin(d_theta[idx])
-        x = c[:, None] * rel_near[None, :, 0] - s[:, None] * rel_near[None, :, 1] + states[idx, ix][:, None]
-        y = s[:, None] * rel_near[None, :, 0] + c[:, None] * rel_near[None, :, 1] + states[idx, iy][:, None]
-        z = np.broadcast_to(z_near[None], x.shape)
-        moved = np.stack([x, y, z], axis=-1).reshape(-1, 3)
-        bad = (obstacles.clearance(moved) < 0.0).reshape(len(idx), -1).any(axis=1)
-        if bad.any():
-            return int(idx[int(np.argmax(bad))]), lo + int(np.argmax(bad)) + 1
-    return None, len(need)
+    field, lattice, resolution, grid_lo, grid_hi = obstacles.kernel_field()
+    hit, tested = rigid_step_hit(local, float(nominal[ix]), float(nominal[iy]), float(nominal[ith]),
+                                 np.ascontiguousarray(states[:, [ix, iy, ith]]), obstacles.lo, obstacles.hi,
+                                 obstacles.box_margin, field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution,
+                                 grid_lo, grid_hi)
+    return (None if hit < 0 else int(hit)), int(tested)
 
 
 # -- the view/state planning loop ------------------------------------------------------------
@@ -387,6 +389,30 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+class _FixedBeams:
+    """The world's sensor with its beam directions computed once.
+
+    The utilities ask ``sensor.beams`` for every candidate (thousands per iteration, k per
+    candidate in EU), and a depth camera recomputes its 19 200 pixel rays on each call;
+    everything else is the sensor's own.
+    """
+
+    def __init__(self, sensor: Any) -> None:
+        self._sensor = sensor
+        self._local: np.ndarray | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sensor, name)
+
+    def local_directions(self) -> np.ndarray:
+        if self._local is None:
+            self._local = np.asarray(self._sensor.local_directions())
+        return self._local
+
+    def beams(self, target: Any, beam_stride: int = 1, frame_stride: int = 1) -> Any:
+        return type(self._sensor).beams(self, target, beam_stride, frame_stride)
+
+
 class NBVSSession:
     """Vasquez-Gomez NBVS loop, one step at a time (like :class:`explore.modelling.ModellingSession`).
 
@@ -415,6 +441,7 @@ class NBVSSession:
     max_draws : cap on the uniform draws per iteration
     bases_per_arm : uniform base poses per arm sample (one FK call each, see :meth:`sample`)
     top : candidates kept for motion planning (paper: 25)
+    rounds : rounds of ``top`` candidates tried while none is feasible (paper: 1; see :meth:`next_round`)
     overlap : registration threshold h (paper: 0.5 in simulation)
     resolution : PVS voxel size (paper: 2 cm octree; 1 cm here for a 15 cm bunny)
     planner, planner_params : motion planner plugin; default ``tuck_and_drive`` (3 s) for a
@@ -432,7 +459,7 @@ class NBVSSession:
                  resolution: float = 0.01, planner: str | None = None, planner_params: dict | None = None,
                  max_views: int = 12, seed: int = 0, beam_stride: int = 8, noise: bool = True,
                  stop_on_collision: bool = True, min_unknown: int = 30, utility_params: dict | None = None,
-                 max_draws: int = 3_000_000, weighting: str = "probability") -> None:
+                 max_draws: int = 3_000_000, weighting: str = "probability", rounds: int = 3) -> None:
         from .metrics import GroundTruthMetrics  # noqa: F401 - fail early if metrics are missing
         from .pvs import PVS
 
@@ -440,7 +467,9 @@ class NBVSSession:
         self.expected, self.k = bool(expected), int(k)
         self.n_samples, self.top, self.overlap = int(n_samples), int(top), float(overlap)
         self.bases_per_arm = max(1, int(bases_per_arm))
-        self.max_draws, self.weighting = int(max_draws), str(weighting)
+        self.max_draws, self.weighting, self.rounds = int(max_draws), str(weighting), max(1, int(rounds))
+        self.ranked: list[ViewState] = []
+        self.tried = 0
         self.max_views, self.seed, self.noise = int(max_views), int(seed), bool(noise)
         self.stop_on_collision, self.min_unknown = bool(stop_on_collision), int(min_unknown)
         self.region_min = np.asarray(sim.spec.region_min, dtype=float)
@@ -465,7 +494,7 @@ class NBVSSession:
         self.rng_sample, self.rng_eu, self.rng_exec, self.rng_sensor = (
             np.random.default_rng(rng.integers(2**63)) for _ in range(4))
         self.plan_seed = int(rng.integers(1, 2**31 - 1))
-        self.ctx = PlanningContext(pvs=self.pvs, surface=None, grid=self._snapshot(), sensor=self.sensor,
+        self.ctx = PlanningContext(pvs=self.pvs, surface=None, grid=self._snapshot(), sensor=_FixedBeams(self.sensor),
                                    robot=self.robot, region_min=self.region_min, region_max=self.region_max,
                                    environment_boxes=[tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object],
                                    rng=np.random.default_rng(rng.integers(2**63)))
@@ -475,6 +504,7 @@ class NBVSSession:
         self.stages: dict[str, int] = {}
         self.executions: list[Execution] = []
         self.plan_log: list[tuple[float, bool]] = []  # (seconds, success) of every planning query
+        self.scan_poses: list[np.ndarray] = []  # world_T_sensor of every scan
         self.status, self.reason = "running", ""
         self._gt: Any = None
 
@@ -532,6 +562,28 @@ class NBVSSession:
         self.scan(self.first_view(attempts), record)
         self.records.append(record)
         return record
+
+    def _ray_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Director rays (origins, directions (n, 3)) hit the region box within range (slab test)."""
+        o, d = origins, directions
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / np.where(np.abs(d) < 1e-12, 1e-12, d)
+            t1, t2 = (self.region_min - o) * inv, (self.region_max - o) * inv
+        near = np.minimum(t1, t2).max(axis=1)
+        far = np.maximum(t1, t2).min(axis=1)
+        return (far >= np.maximum(near, 0.0)) & (near <= float(self.sensor.max_range))
+
+    def _may_hit_slab(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Rays that reach the region's height band [z_min, z_max] within range: a base pose
+        (planar) never changes that, so other arm samples need no base samples at all."""
+        oz, dz = origins[:, 2], directions[:, 2]
+        zlo, zhi = self.region_min[2], self.region_max[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta, tb = (zlo - oz) / dz, (zhi - oz) / dz
+        flat = np.abs(dz) < 1e-12
+        t_in = np.where(flat, 0.0, np.maximum(np.minimum(ta, tb), 0.0))
+        t_out = np.where(flat, np.where((oz >= zlo) & (oz <= zhi), np.inf, -np.inf), np.maximum(ta, tb))
+        return (t_out >= t_in) & (t_in <= float(self.sensor.max_range))
 
     def sample(self) -> list[ViewState]:
         """Uniform states until ``n_samples`` of them aim the director ray at the region (Sec. A8.1).
@@ -616,9 +668,25 @@ class NBVSSession:
         self.stages["registration"] = len(registered)
         surface = [s for s in registered if s.sur > 0 and s.unk >= self.min_unknown]
         self.stages["surface"] = len(surface)
-        ranked = sorted(surface, key=lambda s: -s.sur)[: self.top]
-        self.stages["top"] = len(ranked)
-        return ranked
+        self.ranked, self.tried = sorted(surface, key=lambda s: -s.sur), 0
+        self.stages["planned"] = self.stages["feasible"] = self.stages["rounds"] = 0
+        return self.next_round()
+
+    def next_round(self) -> list[ViewState]:
+        """The next ``top`` candidates by sur (Sec. A8.7: the paper plans the top 25 once).
+
+        When none of a round is feasible (EU rejects the close views whose noisy reach hits
+        the unknown region), the next ``top`` are tried, up to ``rounds`` rounds; an empty list
+        when they are used up.
+        """
+        if self.stages.get("rounds", 0) >= self.rounds:
+            return []
+        chosen = self.ranked[self.tried : self.tried + self.top]
+        self.tried += len(chosen)
+        if chosen:
+            self.stages["rounds"] = self.stages.get("rounds", 0) + 1
+            self.stages["top"] = self.tried
+        return chosen
 
     def plan(self, states: list[ViewState]) -> list[ViewState]:
         """Plan from the current state to each candidate; keep those with a motion (pos = 1).
@@ -653,7 +721,7 @@ class NBVSSession:
                                 planning_time=plan.planning_time, length=path_length(robot, nominal))
             s.nominal, s.length = nominal, s.plan.length
             out.append(s)
-        self.stages["planned"] = len(out)
+        self.stages["planned"] = self.stages.get("planned", 0) + len(out)
         return out
 
     def utility_at(self, samples: StateSamples) -> np.ndarray:
@@ -681,7 +749,7 @@ class NBVSSession:
                 s.score = s.expected.value if s.expected.feasible else 0.0
             else:
                 s.score = s.deterministic
-        self.stages["feasible"] = sum(1 for s in states if s.score > 0)
+        self.stages["feasible"] = self.stages.get("feasible", 0) + sum(1 for s in states if s.score > 0)
         return states
 
     def select(self, states: list[ViewState]) -> ViewState | None:
@@ -695,6 +763,10 @@ class NBVSSession:
         run = self.robot.execute(state.plan, self.rng_exec, noise=self.noise, world="true")
         self.executions.append(run)
         self.q = np.asarray(run.final, dtype=float).copy()
+        if self.robot.base_dofs:  # the heading is periodic: keep it in [-pi, pi) (within the limits)
+            th = self.robot.base_dofs[2]
+            self.q[th] = _wrap(self.q[th])
+            self.robot.q = self.q.copy()
         return run
 
     def acquire(self, pose: Pose) -> Any:
@@ -706,6 +778,7 @@ class NBVSSession:
         self.pvs.integrate(scan)
         self.ctx.grid = self._snapshot()
         self.ctx.sensor_pose = np.asarray(scan.sensor_poses[0]).copy()
+        self.scan_poses.append(self.ctx.sensor_pose)
         self.ctx.iteration += 1
         points = scan.points()
         inside = np.all((points >= self.region_min - 0.01) & (points <= self.region_max + 0.01), axis=1)
@@ -762,13 +835,22 @@ class NBVSSession:
             return self.initial()
         times: dict[str, float] = {}
         since = len(self.plan_log)
-        states: Any = None
-        for name, stage in (("sample", lambda _: self.sample()), ("filter", self.filter), ("plan", self.plan),
-                            ("score", self.score)):
+        t = time.perf_counter()
+        states = self.sample()
+        times["sample"] = time.perf_counter() - t
+        t = time.perf_counter()
+        chosen = self.filter(states)
+        times["filter"] = time.perf_counter() - t
+        states, best = [], None
+        while chosen and best is None:
             t = time.perf_counter()
-            states = stage(states)
-            times[name] = time.perf_counter() - t
-        best = self.select(states)
+            planned = self.plan(chosen)
+            times["plan"] = times.get("plan", 0.0) + time.perf_counter() - t
+            t = time.perf_counter()
+            states += self.score(planned)
+            times["score"] = times.get("score", 0.0) + time.perf_counter() - t
+            best = self.select(states)
+            chosen = [] if best is not None else self.next_round()
         if best is None:
             self.no_candidate()
             return None
@@ -816,9 +898,9 @@ class NBVSSession:
                 q = event.config
                 at = q[base[:2]] if base else self.robot.fk(q)[:2, 3]
                 ax.plot(*at, "x", color="red", ms=10, mew=2)
-        scans = [r for r in self.records if np.isfinite(r.coverage)]
-        if self.ctx.sensor_pose is not None and scans:
-            ax.plot(*self.ctx.sensor_pose[:2, 3], "^", color="k", ms=6, label="last scan")
+        for index, pose in enumerate(self.scan_poses):
+            ax.plot(*pose[:2, 3], "^", color="k", ms=6)
+            ax.annotate(str(index), pose[:2, 3], textcoords="offset points", xytext=(4, 4), fontsize=8)
         ax.set_aspect("equal")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
@@ -827,6 +909,15 @@ class NBVSSession:
         fig.tight_layout()
         fig.savefig(path)
         plt.close(fig)
+
+    def travelled_m(self) -> float:
+        """Metres the base (or, without a base, the sensor) moved in all executed motions."""
+        base = list(self.robot.base_dofs)
+        total = 0.0
+        for run in self.executions:
+            xy = run.configs[:, base[:2]] if base else np.array([self.robot.fk(q)[:3, 3] for q in run.configs])
+            total += float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+        return total
 
     def summary(self) -> dict[str, Any]:
         """Coverage per view (the first entry is the initial scan), collisions, stop reason."""

@@ -37,7 +37,7 @@ class TreeNBVS:
     def _timed(self, stage: str, fn: Any, *args: Any) -> Any:
         t0 = time.perf_counter()
         out = fn(*args)
-        self.stage_s[stage] = time.perf_counter() - t0
+        self.stage_s[stage] = self.stage_s.get(stage, 0.0) + time.perf_counter() - t0
         return out
 
     def first_view(self) -> np.ndarray:
@@ -46,6 +46,7 @@ class TreeNBVS:
     def sample(self) -> list[Any]:
         self._since = len(self.session.plan_log)
         self.stage_s = {}
+        self._states = []
         return self._timed("sample", self.session.sample)
 
     def filter(self, states: list[Any]) -> list[Any]:
@@ -55,15 +56,22 @@ class TreeNBVS:
         return self._timed("plan", self.session.plan, states)
 
     def score(self, states: list[Any]) -> list[Any]:
-        self._states = self._timed("score", self.session.score, states)
-        return self._states
+        scored = self._timed("score", self.session.score, states)
+        self._states += scored
+        return scored
 
-    def select(self, states: list[Any]) -> Any:
-        best = self.session.select(states)
-        self.selection_s.append(sum(self.stage_s.values()))
-        if best is None:
+    def select(self) -> tuple[Any, list[Any]]:
+        """The best candidate scored this iteration, else (None, the next round's candidates);
+        (None, []) stops the run (no view/state left)."""
+        best = self.session.select(self._states)
+        if best is not None:
+            self.selection_s.append(sum(self.stage_s.values()))
+            return best, []
+        more = self.session.next_round()
+        if not more:
+            self.selection_s.append(sum(self.stage_s.values()))
             self.session.no_candidate()
-        return best
+        return None, more
 
     def execute(self, best: Any) -> Any:
         """Run the controls with noise; the record waits for its scan (unless the run collided)."""
@@ -141,6 +149,7 @@ class TreeNBVS:
             "path_length": float(sum(lengths)),
             "path_length_per_move": lengths,
             "path_length_unit": "Vasquez-Gomez Eq. 8 (weighted configuration distance)",
+            "path_length_m": s.travelled_m(),
             "planning": {
                 "queries": len(times),
                 "success_rate": summary["plan_success_rate"],
@@ -249,13 +258,14 @@ class NBVSFilter(ExploreBehaviour):
 
     name = "nbvs_filter"
     reads = ("nbvs", "states")
-    writes = ("states",)
+    writes = ("states", "chosen")
     blocking = True
 
     def work(self) -> Outcome:
         session = _session(self)
         states = session.filter(self.read("states"))
         self.write("states", states)
+        self.write("chosen", False)
         stages = session.session.stages
         self.context.trace("decision", what="filter", **{k: int(v) for k, v in stages.items()})
         return success(" -> ".join(f"{k} {v}" for k, v in stages.items()))
@@ -294,16 +304,22 @@ class NBVSScore(ExploreBehaviour):
 
 
 class NBVSSelect(ExploreBehaviour):
-    """argmax of the (expected) utility; when nothing is left the run is done (with the stage)."""
+    """argmax of the (expected) utility; if none is feasible, the next round of candidates;
+    when nothing is left the run is done (with the stage that emptied)."""
 
     name = "nbvs_select"
-    reads = ("nbvs", "states")
-    writes = ("candidate", "done", "reason")
+    reads = ("nbvs",)
+    writes = ("candidate", "chosen", "states", "done", "reason")
 
     def work(self) -> Outcome:
         session = _session(self)
-        best = session.select(self.read("states"))
+        best, more = session.select()
         self.write("candidate", best)
+        if best is None and more:
+            self.write("states", more)
+            self.write("chosen", False)
+            return success(f"none feasible: {len(more)} more candidates")
+        self.write("chosen", True)
         if best is None:
             self.write("done", True)
             self.write("reason", session.session.reason)

@@ -5,7 +5,8 @@ Every robot exposes FK to the sensor pose (OpenCV frame), IK with restarts, join
 points sampled on the links for the PVS), the weighted configuration distance of
 Vasquez-Gomez Eq. 8, and ``execute(plan, rng, noise=True)``: velocity controls with
 truncated Gaussian noise (Vasquez-Gomez Sec. A6: sigma_v = 1.65 mm/s, sigma_omega =
-0.28 rad/s, beta = 3 sigma; arm joints optional), Euler-integrated every ``dt``, each executed
+0.28 rad/s, beta = 3 sigma; arm joints optional; only on the controls of parts commanded to
+move, see ``noise_mask``), Euler-integrated every ``dt``, each executed
 configuration checked against the TRUE world (environment + objects). Robot bodies are not
 part of the ground truth the sensors cast rays against (``sim.raycaster``).
 """
@@ -403,8 +404,9 @@ class _BulletRobot(Robot):
         """Configurations under ``controls`` + truncated noise; (configs, eps, log p(eps))."""
         sigma = self.control_sigma()
         k = len(controls)
+        active = self.noise_mask(controls)
         if noise and rng is not None and np.any(sigma > 0):
-            eps = truncated_normal(rng, sigma, k, self.truncation)
+            eps = truncated_normal(rng, sigma, k, self.truncation) * active
         else:
             eps = np.zeros((k, len(sigma)))
         configs = np.empty((k + 1, self.dof))
@@ -414,7 +416,18 @@ class _BulletRobot(Robot):
             joints = self.joint_dofs
             q[joints] = np.clip(q[joints], self.lower[joints], self.upper[joints])
             configs[t + 1] = q
-        return configs, eps, truncated_normal_logpdf(eps, sigma, self.truncation)
+        return configs, eps, truncated_normal_logpdf(eps, sigma, self.truncation, active)
+
+    def noise_mask(self, controls: np.ndarray) -> np.ndarray:
+        """(k, nc) True where a control error is sampled: the base controls of steps that move
+        the base, each joint's control when it moves. A part commanded to stand still does not
+        drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
+        controls = np.asarray(controls, dtype=float).reshape(len(controls), -1)
+        moving = np.abs(controls) > 1e-12
+        nb = self.n_base_controls
+        if nb:
+            moving[:, :nb] = moving[:, :nb].any(axis=1, keepdims=True)
+        return moving
 
     def execute(
         self,
