@@ -656,11 +656,17 @@ def straight_line(
 
 
 def box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
-    """Euclidean distance (n,) from points to the nearest of the boxes [lo_b, hi_b] (0 inside)."""
+    """Signed distance (n,) from points to the nearest of the boxes [lo_b, hi_b].
+
+    Outside a box the Euclidean distance, inside minus the depth below its nearest face.
+    """
     if len(lo) == 0:
         return np.full(len(points), np.inf)
-    gap = np.maximum(np.maximum(lo[None] - points[:, None], 0.0), points[:, None] - hi[None])  # (n, b, 3)
-    return np.sqrt(np.einsum("nbk,nbk->nb", gap, gap)).min(axis=1)
+    below, above = lo[None] - points[:, None], points[:, None] - hi[None]  # (n, b, 3)
+    gap = np.maximum(np.maximum(below, 0.0), above)
+    outside = np.sqrt(np.einsum("nbk,nbk->nb", gap, gap))
+    depth = np.minimum(-below, -above).min(axis=2)  # > 0 inside
+    return np.where(outside > 0.0, outside, -np.maximum(depth, 0.0)).min(axis=1)
 
 
 class PlanarChecker:

@@ -58,7 +58,7 @@ def point_clearance(
 ) -> float:
     """Clearance of one point as ``explore.nbvs.ObstacleField.clearance`` (< 0: collision).
 
-    Boxes: the distance to the nearest box minus ``margin``. PVS (``field`` not empty): inside
+    Boxes: the signed distance to the nearest box (negative inside) minus ``margin``. PVS (``field`` not empty): inside
     the grid the distance field minus ``half_diagonal``, outside the distance to the grid box.
     """
     best = np.inf
@@ -69,9 +69,13 @@ def point_clearance(
         d += g * g
         g = lo[b, 2] - z if z < lo[b, 2] else (z - hi[b, 2] if z > hi[b, 2] else 0.0)
         d += g * g
-        if d < best:
-            best = d
-    out = math.sqrt(best) - margin
+        if d > 0.0:
+            signed = math.sqrt(d)
+        else:  # inside: minus the depth below the nearest face
+            signed = -min(x - lo[b, 0], hi[b, 0] - x, y - lo[b, 1], hi[b, 1] - y, z - lo[b, 2], hi[b, 2] - z)
+        if signed < best:
+            best = signed
+    out = best - margin
     if field.shape[0] > 0:
         inv = 1.0 / resolution
         ix = int(math.floor(x * inv)) - lattice[0]

@@ -81,7 +81,8 @@ class ObstacleField:
     """Clearance of points from the planning obstacles O = W_obj u W_unk u O_env (Sec. A1).
 
     ``boxes`` are the known environment bodies as axis-aligned boxes (every shipped world
-    builds its environment from boxes); the clearance from them is exact minus ``box_margin``
+    builds its environment from boxes); the clearance from them is the exact signed distance
+    (negative inside) minus ``box_margin``
     (the robot's planning clearance, so that a planner-validated state has clearance >= 0).
     The PVS contributes every voxel with p >= 0.05 (unknown is an obstacle): its distance
     field minus half a voxel diagonal inside the grid, the distance to the grid box outside.

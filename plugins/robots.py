@@ -418,15 +418,20 @@ class _BulletRobot(Robot):
             configs[t + 1] = q
         return configs, eps, truncated_normal_logpdf(eps, sigma, self.truncation, active)
 
+    def noise_groups(self) -> list[list[int]]:
+        """Controls that err together: the base's (v, omega or vx, vy, omega), each joint alone."""
+        nb = self.n_base_controls
+        groups = [list(range(nb))] if nb else []
+        return groups + [[nb + i] for i in range(len(self.joint_dofs))]
+
     def noise_mask(self, controls: np.ndarray) -> np.ndarray:
-        """(k, nc) True where a control error is sampled: the base controls of steps that move
-        the base, each joint's control when it moves. A part commanded to stand still does not
-        drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
+        """(k, nc) True where a control error is sampled: every control of a group (the base, a
+        joint) at the steps that command that group to move. A part commanded to stand still
+        does not drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
         controls = np.asarray(controls, dtype=float).reshape(len(controls), -1)
         moving = np.abs(controls) > 1e-12
-        nb = self.n_base_controls
-        if nb:
-            moving[:, :nb] = moving[:, :nb].any(axis=1, keepdims=True)
+        for group in self.noise_groups():
+            moving[:, group] = moving[:, group].any(axis=1, keepdims=True)
         return moving
 
     def execute(
@@ -1054,6 +1059,10 @@ class FreeFlyer(_BulletRobot):
 
     def control_sigma(self) -> Array:
         return np.array([self.sigma_position] * 3 + [self.sigma_rotation] * 3)
+
+    def noise_groups(self) -> list[list[int]]:
+        """The translational and the rotational velocity err as vectors."""
+        return [[0, 1, 2], [3, 4, 5]]
 
     def fk(self, q: Array) -> Pose:
         pose = np.eye(4)

@@ -123,3 +123,79 @@ def test_two_view_nbvs_run_increases_coverage(registry) -> None:
         assert summary["views"] == 3, summary["reason"]  # the initial scan + 2 planned views
         assert coverage[-1] > coverage[0] > 0.0
         assert summary["collisions"] == 0
+
+
+def test_log_probability_is_the_truncated_normal_density() -> None:
+    """log P (Eq. 2-3) = sum of scipy's truncated-normal log densities over the sampled errors."""
+    from scipy.stats import truncnorm
+
+    from explore.motion import truncated_normal, truncated_normal_logpdf
+
+    sigma = np.array([1.65e-3, 0.28, 0.0])
+    eps = truncated_normal(np.random.default_rng(3), sigma, 40)
+    eps[:, 2] = 0.0
+    active = np.ones_like(eps, dtype=bool)
+    active[:10] = False  # e.g. the base stands still while the arm moves
+    expected = sum(truncnorm.logpdf(eps[10:, j], -3, 3, scale=sigma[j]).sum() for j in range(2))
+    assert truncated_normal_logpdf(eps, sigma, 3.0, active) == pytest.approx(expected, rel=1e-9)
+    assert truncated_normal_logpdf(eps, sigma) == pytest.approx(
+        sum(truncnorm.logpdf(eps[:, j], -3, 3, scale=sigma[j]).sum() for j in range(2)), rel=1e-9)
+
+
+def test_expected_utility_weights_and_effective_sample_size(cluttered) -> None:
+    """Algorithm 1's weights are eta P_i (ESS below k); ``mean`` weights give ESS = k."""
+    robot = cluttered.robot
+    plan = MotionPlan(_drive_past_chair(robot, 1.0))
+    field = ObstacleField.from_sim(cluttered)
+
+    def utility(samples: StateSamples) -> np.ndarray:
+        return samples.configs[:, 1]
+
+    paper = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field)
+    flat = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field,
+                            weighting="mean")
+    assert flat.ess == pytest.approx(40.0) and flat.value == pytest.approx(float(flat.utilities.mean()))
+    assert 1.0 <= paper.ess < 40.0
+    assert paper.ess == pytest.approx(1.0 / np.sum(paper.weights**2))
+    assert np.array_equal(paper.utilities, flat.utilities)
+
+
+def _free_flyer_context(sim, registry):
+    from explore.candidates import PlanningContext
+    from explore.pvs import PVS
+    from explore.visibility import VoxelGrid
+
+    pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
+    prob = (1.0 / (1.0 + np.exp(-pvs.log_odds.astype(np.float64)))).astype(np.float32)
+    grid = VoxelGrid(prob, np.asarray(pvs.origin, dtype=float), float(pvs.resolution))
+    return PlanningContext(pvs=pvs, surface=None, grid=grid, sensor=sim.sensor, robot=sim.robot,
+                           region_min=np.asarray(sim.spec.region_min), region_max=np.asarray(sim.spec.region_max),
+                           environment_boxes=[tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object],
+                           rng=np.random.default_rng(0))
+
+
+def test_expected_utility_plugin_wraps_any_utility(registry) -> None:
+    """Without noise EU equals the wrapped utility; with noise a path 5 mm from the pedestal scores 0."""
+    from explore.candidates import Candidate
+    from explore.geometry import look_at
+
+    with Simulation("bunny_pedestal", registry) as sim:
+        robot = sim.robot
+        ctx = _free_flyer_context(sim, registry)
+        base = registry.create("utility", "unknown_count", {}, "<test>")
+        eu = registry.create("utility", "expected_utility", {"base": "unknown_count", "k": 30}, "<test>")
+        bunny = np.array([0.0, 0.0, 0.6])
+
+        def view(x: float, y: float) -> np.ndarray:
+            return look_at([x, y, 0.3], bunny)
+
+        robot.q = robot.ik(view(0.085, -0.3))  # sphere (r 3 cm) 3.5 cm from the pedestal face x = 0.05
+        near, far = Candidate(view(0.085, 0.3), "test"), Candidate(view(0.4, 0.3), "test")
+        plain = base.score([near, far], ctx)
+        assert np.all(plain > 0)
+        assert np.allclose(eu.score([near, far], ctx), plain, rtol=1e-12)  # no noise: every sample is nominal
+        robot.sigma_position = 0.02  # m/s per axis: ~1 cm spread after the 6 s drive
+        scored = eu.score([near, far], ctx)
+        assert scored[0] == 0.0 and near.diagnostics["eu_feasible"] == 0.0
+        assert scored[1] > 0.0 and far.diagnostics["eu_feasible"] == 1.0
+        assert scored[1] == pytest.approx(plain[1], rel=0.5)  # the samples see about what the nominal sees
