@@ -210,3 +210,35 @@ def test_expected_utility_plugin_wraps_any_utility(registry) -> None:
         assert scored[0] == 0.0 and near.diagnostics["eu_feasible"] == 0.0
         assert scored[1] > 0.0 and far.diagnostics["eu_feasible"] == 1.0
         assert scored[1] == pytest.approx(plain[1], rel=0.5)  # the samples see about what the nominal sees
+
+
+@pytest.mark.slow
+def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
+    """trees/nbvs_mobile.yaml with vasquez/eu: the first scan and two planned views, executed
+    without noise (EU still scores with the noise model), with the metrics and pictures."""
+    import json
+
+    from explore.run import RunConfig, execute
+    from explore.trees import load_tree
+
+    tree = load_tree("nbvs_mobile", registry)
+    assert {n.behaviour for n in tree.root.walk() if n.behaviour} >= {
+        "start_nbvs", "nbvs_sample_states", "nbvs_filter", "nbvs_plan", "nbvs_score", "nbvs_select",
+        "nbvs_execute", "nbvs_acquire", "nbvs_integrate", "nbvs_check_termination"}
+    settings = {"start_nbvs.n_samples": 800, "start_nbvs.top": 6, "start_nbvs.noise": False, "strategy.k": 10}
+    config = RunConfig(tree="nbvs_mobile", world="cluttered", strategy="vasquez/eu", seed=0, max_scans=2,
+                       settings=settings, out=tmp_path / "run")
+    result = execute(config, registry)
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert result.status == "success", result.reason
+    assert metrics["expected_utility"] and metrics["k"] == 10 and metrics["strategy"] == "vasquez/eu"
+    assert 2 <= metrics["scans"] <= 3 and metrics["trajectories"] == metrics["scans"] - 1
+    assert metrics["collisions"] == 0
+    coverage = metrics["coverage_per_scan"]
+    assert len(coverage) == metrics["scans"] and coverage[-1] > coverage[0] > 0.0
+    assert all(b >= a for a, b in zip(coverage, coverage[1:], strict=False))
+    assert metrics["planning"]["queries"] >= 6 and metrics["planning"]["success_rate"] > 0.0
+    assert metrics["path_length"] > 0.0 and metrics["path_length_m"] > 0.0
+    assert len(metrics["ess_per_move"]) == metrics["trajectories"]
+    for name in ("trajectories.png", "coverage.png", "pvs.npz", "points.ply", "trace.jsonl"):
+        assert (tmp_path / "run" / name).stat().st_size > 0
