@@ -8,15 +8,16 @@ queries join two valid configurations that look at the region (IK for the arm an
 flyer, uniform states for the mobile robots); ``try_direct`` is off, so OMPL always plans.
 
 Part 2, bunny on a table among obstacles (``worlds/cluttered.yaml``), mobile manipulator with
-noise (sigma_v 1.65 mm/s, sigma_omega 0.28 rad/s): deterministic utility (DU-MU) vs expected
-utility (EU-MU) for several k, several seeds; mean / max ground-truth coverage, collision rate
-(collisions / executed trajectories) and the share of runs with a collision (a run ends at
-its first collision, as in the paper).
+noise (sigma_v 1.65 mm/s, sigma_omega 0.28 rad/s): deterministic utility without noise (DU)
+and with it (DU-MU) vs expected utility (EU-MU) for several k, several seeds, 12 views;
+mean / max ground-truth coverage, collision rate (collisions / executed trajectories), the
+share of runs with a collision (a run ends at its first collision, as in the paper) and the
+median effective sample size of the EU weights.
 
-    .venv/bin/python benchmarks/planners.py            # quick (a few minutes)
-    .venv/bin/python benchmarks/planners.py --full     # paper-size grid (hours)
+    .venv/bin/python benchmarks/planners.py --part planners            # planners (~20 min)
+    .venv/bin/python benchmarks/planners.py --part nbvs --runs-file runs/table5.jsonl   # hours, resumable
+    .venv/bin/python benchmarks/planners.py --full     # paper-size grid
     .venv/bin/python benchmarks/planners.py --json     # rows as JSON only
-    .venv/bin/python benchmarks/planners.py --part planners|nbvs
 """
 
 from __future__ import annotations
@@ -171,43 +172,72 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
     return rows
 
 
-def nbvs_rows(full: bool, log: Any) -> list[dict[str, Any]]:
+NBVS_WORLD = "cluttered"
+
+
+def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...] = (), views: int | None = None,
+              runs_file: str | None = None, approaches: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+    """Vasquez-Gomez Table 5: DU (no noise), DU-MU and EU-MU for each k, one row per approach.
+
+    Every finished run is appended to ``runs_file`` (JSON lines) and found there again on a
+    re-run with the same settings, so a long grid can be stopped and resumed.
+    """
     from explore.nbvs import NBVSSession
     from explore.registry import Registry
     from explore.simulation import Simulation
 
     registry = Registry.load()
-    seeds = range(10 if full else 5)
-    ks = (1, 10, 100, 500) if full else (10, 100)
-    views = 12 if full else 3
-    options = {"n_samples": 40000, "top": 25} if full else {"n_samples": 30000, "top": 10}
-    options["planner_params"] = {"time_limit": 1.0 if full else 0.5}
-    configs = [("DU-MU", False, 0)] + [("EU-MU", True, k) for k in ks]
+    seed_list = range(seeds or (10 if full else 5))
+    ks = ks or ((1, 10, 100, 500) if full else (1, 100, 500))
+    views = views or 12
+    configs = [("DU", False, 1, False), ("DU-MU", False, 1, True)] + [("EU-MU", True, k, True) for k in ks]
+    if approaches:
+        configs = [c for c in configs if c[0] in approaches]
+    done: dict[tuple, dict[str, Any]] = {}
+    if runs_file and os.path.exists(runs_file):
+        with open(runs_file, encoding="utf-8") as handle:
+            for line in handle:
+                run = json.loads(line)
+                done[(run["approach"], run["k"], run["seed"], run["max_views"])] = run
     rows = []
-    for approach, expected, k in configs:
+    for approach, expected, k, noise in configs:
         runs = []
-        t0 = time.perf_counter()
-        for seed in seeds:
-            with Simulation("cluttered", registry) as sim:
-                session = NBVSSession(sim, registry, expected=expected, k=max(k, 1), seed=seed, max_views=views,
-                                      **options)
-                summary = session.run()
-                runs.append(summary)
-                log(f"  {approach} k={k:<3d} seed {seed}: views {summary['views']:2d}  coverage "
-                    f"{summary['final_coverage']:.3f}  collisions {summary['collisions']}/{summary['trajectories']}"
-                    f"  ({summary['reason']})")
+        for seed in seed_list:
+            key = (approach, k, seed, views)
+            if key not in done:
+                t0 = time.perf_counter()
+                with Simulation(NBVS_WORLD, registry) as sim:
+                    session = NBVSSession(sim, registry, expected=expected, k=k, seed=seed, max_views=views,
+                                          noise=noise)
+                    summary = session.run(lambda r, a=approach, s=seed, kk=k: log(
+                        f"  {a} k={kk} seed {s} view {r.index}: coverage {r.coverage:.3f}  collided {r.collided}  "
+                        f"ess {r.ess if r.ess is None else round(r.ess, 1)}  stages {r.stages}"))
+                summary.update({"approach": approach, "k": k, "seed": seed, "max_views": views,
+                                "seconds": time.perf_counter() - t0, "travelled_m": session.travelled_m()})
+                summary = json.loads(json.dumps(summary, default=float))
+                done[key] = summary
+                if runs_file:
+                    with open(runs_file, "a", encoding="utf-8") as handle:
+                        handle.write(json.dumps(summary) + "\n")
+            run = done[key]
+            runs.append(run)
+            log(f"{approach} k={k:<3d} seed {seed}: views {run['views']:2d}  coverage {run['final_coverage']:.3f}  "
+                f"collisions {run['collisions']}/{run['trajectories']}  ({run['reason']}, {run['seconds']:.0f} s)")
         trajectories = sum(r["trajectories"] for r in runs)
         collisions = sum(r["collisions"] for r in runs)
         cov = [r["final_coverage"] for r in runs]
-        row = {
-            "part": "nbvs", "world": "cluttered", "approach": approach, "k": k, "runs": len(runs),
-            "max_views": views, "mean_coverage": float(np.mean(cov)), "max_coverage": float(np.max(cov)),
-            "collision_rate": collisions / max(1, trajectories), "runs_with_collision": float(
-                np.mean([r["collided"] for r in runs])),
-            "trajectories": trajectories, "mean_views": float(np.mean([r["views"] for r in runs])),
-            "seconds_per_run": (time.perf_counter() - t0) / len(runs),
-        }
-        rows.append(row)
+        ess = [e for r in runs for e in r["ess"] if e is not None]
+        rows.append({
+            "part": "nbvs", "world": NBVS_WORLD, "approach": approach, "k": k if expected else None,
+            "runs": len(runs), "max_views": views, "mean_coverage": float(np.mean(cov)),
+            "max_coverage": float(np.max(cov)), "collision_rate": collisions / max(1, trajectories),
+            "runs_with_collision": float(np.mean([r["collided"] for r in runs])), "trajectories": trajectories,
+            "mean_views": float(np.mean([r["views"] for r in runs])),
+            "median_ess": float(np.median(ess)) if ess else None,
+            "plan_success_rate": float(np.mean([r["plan_success_rate"] for r in runs])),
+            "seconds_per_run": float(np.mean([r["seconds"] for r in runs])),
+            "travelled_m_per_run": float(np.mean([r["travelled_m"] for r in runs])),
+        })
     return rows
 
 
@@ -223,12 +253,16 @@ def print_tables(rows: list[dict[str, Any]]) -> None:
                   f"{r['collision_rate']:10.0%}")
     nbvs = [r for r in rows if r["part"] == "nbvs"]
     if nbvs:
-        print("\nVasquez-Gomez Table 5 (cluttered bunny, noisy mobile manipulator)")
-        print("approach  k     runs  mean cov  max cov  collision rate  runs w/ collision  mean views  s/run")
+        print(f"\nVasquez-Gomez Table 5 ({nbvs[0]['world']}: bunny on a table among furniture, mobile "
+              f"manipulator, sigma_v 1.65 mm/s, sigma_w 0.28 rad/s)")
+        print("approach    k  runs  mean cov  max cov  collision rate  runs w/ collision  mean views  median ESS  "
+              "s/run")
         for r in nbvs:
-            print(f"{r['approach']:8s} {r['k']:4d} {r['runs']:6d} {r['mean_coverage']:9.1%} {r['max_coverage']:8.1%} "
+            k = "-" if r["k"] is None else str(r["k"])
+            ess = "-" if r["median_ess"] is None else f"{r['median_ess']:.1f}"
+            print(f"{r['approach']:8s} {k:>4s} {r['runs']:5d} {r['mean_coverage']:9.1%} {r['max_coverage']:8.1%} "
                   f"{r['collision_rate']:15.0%} {r['runs_with_collision']:18.0%} {r['mean_views']:11.1f} "
-                  f"{r['seconds_per_run']:6.0f}")
+                  f"{ess:>11s} {r['seconds_per_run']:6.0f}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -239,6 +273,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worlds", default="", help="comma-separated subset of the planner worlds")
     parser.add_argument("--planners", default="", help="comma-separated subset of the planners")
     parser.add_argument("--queries", type=int, default=None, help="queries per world (15; --full 30)")
+    parser.add_argument("--seeds", type=int, default=None, help="NBVS runs per approach (5; --full 10)")
+    parser.add_argument("--ks", default="", help="comma-separated k of EU-MU (1,100,500; --full 1,10,100,500)")
+    parser.add_argument("--views", type=int, default=None, help="planned views per NBVS run (12, as the paper)")
+    parser.add_argument("--approaches", default="", help="subset of DU,DU-MU,EU-MU")
+    parser.add_argument("--runs-file", default=None, help="JSON lines of finished NBVS runs (resume)")
     args = parser.parse_args(argv)
 
     def log(line: str) -> None:
@@ -250,7 +289,8 @@ def main(argv: list[str] | None = None) -> int:
         rows += planner_rows(args.full, log, tuple(w for w in args.worlds.split(",") if w),
                              tuple(p for p in args.planners.split(",") if p), args.queries)
     if args.part in ("all", "nbvs"):
-        rows += nbvs_rows(args.full, log)
+        rows += nbvs_rows(args.full, log, args.seeds, tuple(int(k) for k in args.ks.split(",") if k), args.views,
+                          args.runs_file, tuple(a for a in args.approaches.split(",") if a))
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
