@@ -4,14 +4,15 @@ Re-creates Vasquez-Gomez, Sucar & Murrieta-Cid, "View/state planning for three-d
 object reconstruction under uncertainty" (seed 001; digest Part A) for any robot plugin:
 
 * **Candidates** are robot *states* sampled uniformly in the state space (no IK); a state is
-  kept only if the sensor's director ray (optical axis) hits the region box within range
-  (Sec. A8 step 1, 10 000 samples in simulation).
+  kept only if the sensor's director ray (optical axis) hits the region box within range,
+  until 10 000 are kept (Sec. A8 step 1, "10 000 samples whose sensor ray hits the region").
 * **Filter pipeline** in the paper's order, cheapest first (Sec. A8): collision (robot vs the
   known environment and every not-confidently-free PVS voxel: O = W_obj u W_unk u O_env) ->
   visibility (oc_o, un_o: distinct occupied / unknown voxels hit first by the simulated
   beams) -> registration overlap oc_o / (oc_o + un_o) > h (Eq. 5) -> surface factor
   sur = un_o / un_total > 0 (Eq. 6) -> top 25 by sur -> motion planning (pos, Eq. 4) ->
-  utility. :attr:`NBVSSession.stages` records the survivors of every stage.
+  utility (the next 25 when none is feasible, up to ``rounds``). :attr:`NBVSSession.stages`
+  records the survivors of every stage.
 * **Utility** g = pos * reg * sur * dist (Eq. 4), dist = 1 / (1 + rho) with rho the weighted
   length (Eq. 8) of the planned path (Eq. 7); any registered utility plugin can replace the
   view part (then g = score * dist).
@@ -23,9 +24,12 @@ object reconstruction under uncertainty" (seed 001; digest Part A) for any robot
   (Eq. 11-18).
 
 Choices where the paper is silent (named parameters): the PVS voxel size (1 cm), the beam
-stride of the simulated camera (every 8th beam), the planner (OMPL RRT-Connect in the full
-configuration space, then per-``dt`` velocity controls from ``robot.controls_from_path``;
-the paper's RRT Ext-Ext is kinodynamic), the collision test of samples (points on the robot's
+stride of the simulated camera (every 8th beam), the planner (for a mobile robot
+``tuck_and_drive``: arm to its travel configuration, an OMPL RRT-Connect base path whose
+segments the differential base executes exactly as turn-drive-turn, arm to the goal, as
+per-``dt`` velocity controls; the paper's RRT Ext-Ext is kinodynamic, ``planner=
+"kinodynamic"`` uses OMPL's control RRT), the noise step (the robot's ``dt`` = 50 ms, errors
+only on the controls of moving parts), the collision test of samples (points on the robot's
 surface, see :class:`ObstacleField`), and re-localisation after a scan (assumed exact: the
 scan is integrated at the executed pose, the next plan starts at the executed state).
 """
