@@ -602,7 +602,8 @@ def _ompl_search(
 ) -> np.ndarray | None:
     """One OMPL solve with motions checked every ``check_factor * problem.resolution``.
 
-    Simplification is skipped once ``deadline`` has passed (the unsimplified path is valid).
+    Simplification runs in rounds of 10 shortcut attempts until one round changes nothing or
+    ``deadline`` passes (the path is valid after every round).
     """
     ob, og, _ = _ompl()
     n = len(start)
@@ -624,11 +625,13 @@ def _ompl_search(
     if not status or not ss.haveExactSolutionPath():
         return None
     solution = ss.getSolutionPath()
-    if simplify and solution.getStateCount() > 2 and (deadline is None or time.perf_counter() < deadline):
+    if simplify and solution.getStateCount() > 2:
         simplifier = og.PathSimplifier(si)
-        simplifier.reduceVertices(solution)
-        simplifier.collapseCloseVertices(solution)
-        simplifier.reduceVertices(solution)
+        for shortcut in (simplifier.reduceVertices, simplifier.collapseCloseVertices, simplifier.reduceVertices):
+            # rounds of 10 shortcut attempts (each checks one motion) while time remains
+            while solution.getStateCount() > 2 and (deadline is None or time.perf_counter() < deadline):
+                if not shortcut(solution, 10, 10):
+                    break
     path = np.array(
         [[solution.getState(i)[k] for k in builtins_range(n)] for i in builtins_range(solution.getStateCount())]
     )
