@@ -519,7 +519,7 @@ def plan(
     Only exact solutions are returned, and every returned segment has been checked every
     ``problem.resolution`` (L2) with the clearance margin, as the robot executes it (a
     differential base turns, drives and turns: OMPL checks motions with that local planner,
-    :class:`_ExecutedMotionValidator`). ``time_limit`` bounds the whole call: the search,
+    :func:`_executed_motion_validator`). ``time_limit`` bounds the whole call: the search,
     the simplification, the re-check and the retry (wall time from entry; one validity
     check may run past it).
 
@@ -565,27 +565,23 @@ def plan(
     return None
 
 
-class _ExecutedMotionValidator:
+def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int, deadline: float | None) -> Any:
     """OMPL motion validator that checks the motion the robot executes (turn-drive-turn).
 
-    Built lazily as a subclass of ``ompl.base.MotionValidator`` (the nanobind bindings call
-    the Python ``checkMotion``); used for robots whose ``execution_path`` differs from the
-    straight segment (a differential base).
+    A subclass of ``ompl.base.MotionValidator`` (the nanobind bindings call the Python
+    ``checkMotion``), for robots whose ``execution_path`` differs from the straight segment
+    (a differential base). Past ``deadline`` every motion is invalid (the search winds down).
     """
+    ob, _, _ = _ompl()
 
-    @staticmethod
-    def create(si: Any, problem: MotionProblem, resolution: float, n: int, deadline: float | None) -> Any:
-        """A validator instance; past ``deadline`` every motion is invalid (the search winds down)."""
-        ob, _, _ = _ompl()
+    class Validator(ob.MotionValidator):
+        def checkMotion(self, a: Any, b: Any, *last_valid: Any) -> bool:  # noqa: N802 - OMPL's name
+            qa = [a[i] for i in builtins_range(n)]
+            qb = [b[i] for i in builtins_range(n)]
+            path = problem.motion_path(np.array([qa, qb]))
+            return bool(check_path_until(problem, path, deadline, resolution, margin=None))
 
-        class Validator(ob.MotionValidator):
-            def checkMotion(self, a: Any, b: Any, *last_valid: Any) -> bool:  # noqa: N802 - OMPL's name
-                qa = [a[i] for i in builtins_range(n)]
-                qb = [b[i] for i in builtins_range(n)]
-                path = problem.motion_path(np.array([qa, qb]))
-                return bool(check_path_until(problem, path, deadline, resolution, margin=None))
-
-        return Validator(si)
+    return Validator(si)
 
 
 def _ompl_search(
@@ -615,7 +611,7 @@ def _ompl_search(
     si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
     probe = np.vstack([start, goal])
     if problem.motion_path(probe).shape != probe.shape:  # the robot does not drive straight segments
-        si.setMotionValidator(_ExecutedMotionValidator.create(si, problem, resolution, n, deadline))
+        si.setMotionValidator(_executed_motion_validator(si, problem, resolution, n, deadline))
     instance = planner_class(planner)(si)
     if step > 0 and hasattr(instance, "setRange"):
         instance.setRange(step)
