@@ -7,9 +7,13 @@
   environment (``sim.environment_ids()``) and, optionally, a ``space_free(points) -> bool``
   callable (the PVS distance field: everything not confidently free, p >= 0.05, is an
   obstacle; Kriegel thesis Sec. 3.2.2) evaluated on points sampled on the robot's links.
-* :func:`plan` wraps every OMPL geometric planner by name; :func:`plan_kinodynamic` plans
-  base motions with ``ompl.control`` (unicycle or omnidirectional model) and returns per-step
-  velocity controls; :func:`validate_path` re-checks a path densely.
+* :func:`plan` wraps every OMPL geometric planner the installed bindings offer, by name, within
+  its time limit (search, re-check and retry included); a differential base is checked as it
+  drives (turn-drive-turn). :func:`plan_kinodynamic` (``ompl.control``, unicycle or
+  omnidirectional model) and :func:`plan_mobile` (geometric base path) move a mobile robot:
+  arm to its travel configuration, base, arm to the goal, with per-step velocity controls;
+  :class:`PlanarChecker` tests base poses of the rigid robot fast; :func:`validate_path`
+  re-checks a path densely.
 * :func:`linear_scan_path_ik` validates a linear Cartesian scan path in 10 mm portions with
   IK and continuity (Kriegel thesis Sec. 2 motion planning); :func:`classify_blocked`
   applies the NBS rule (through occupied -> discard, through unknown -> keep for later).
