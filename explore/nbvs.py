@@ -533,12 +533,27 @@ class NBVSSession:
         return float(self._gt.coverage(np.vstack(self.points)))
 
     # -- steps -------------------------------------------------------------------------------
+    def _sees_region(self, eye: Array) -> bool:
+        """Lines of sight from ``eye`` to the region's centre and (5 % inset) corners miss the known
+        environment (sampled every 1 cm against its boxes)."""
+        lo, hi = self.region_min, self.region_max
+        a, b = lo + 0.05 * (hi - lo), hi - 0.05 * (hi - lo)
+        corners = np.array([[x, y, z] for x in (a[0], b[0]) for y in (a[1], b[1]) for z in (a[2], b[2])])
+        for target in np.vstack([0.5 * (lo + hi), corners]):
+            ray = target - eye
+            steps = np.linspace(0.0, 1.0, int(np.linalg.norm(ray) / 0.01) + 2)[:, None]
+            if np.any(box_distance(eye + steps * ray, self.obstacles.lo, self.obstacles.hi) <= 0.0):
+                return False
+        return True
+
     def first_view(self, attempts: int = 3000) -> Pose:
         """The first, exactly known state (Sec. A2 step 1): no motion; its sensor pose.
 
         The start base is kept; arm configurations are sampled and the one whose optical axis
-        points most directly at the region centre from 0.4-1.2 m (and is collision-free in
-        the known environment and the all-unknown PVS) is taken.
+        points most directly at the region centre from 0.4-1.2 m, with lines of sight to the
+        region's centre and corners past the known environment (a view from below the table
+        top sees the table) and collision-free in the known environment and the all-unknown
+        PVS, is taken.
         """
         robot, q0 = self.robot, self.q.copy()
         centre = 0.5 * (self.region_min + self.region_max)
@@ -553,8 +568,11 @@ class NBVSSession:
             if not 0.4 <= dist <= 1.2:
                 continue
             value = float(ray @ pose[:3, 2]) / dist
-            if value > best and not robot.in_collision(q, "known") and \
-                    np.all(self.obstacles.clearance(robot.link_points(q)) >= 0.0):
+            if value <= best:
+                continue
+            if not self._sees_region(pose[:3, 3]):
+                continue
+            if not robot.in_collision(q, "known") and np.all(self.obstacles.clearance(robot.link_points(q)) >= 0.0):
                 best, best_q = value, q
         self.q = best_q
         robot.q = best_q.copy()
