@@ -96,6 +96,8 @@ class RerunLog:
         self.rec.log("world/robot_sensor", self.rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
 
     def close(self) -> None:
+        """Flush and finish the file (``disconnect`` writes the footer readers need)."""
         if not self._closed:
             self.rec.flush()
+            self.rec.disconnect()
             self._closed = True
