@@ -154,6 +154,8 @@ class RegisterScan(ExploreBehaviour):
         Param("radius", float, 0.003, "m", "correspondence radius", low=1e-5),
         Param("iterations", int, 3, "", "ICP iterations (thesis 2-3)", low=1),
         Param("normal_gate_deg", float, 60.0, "deg", "reject pairs whose normals differ more", low=0.0, high=180.0),
+        Param("method", str, "point_to_point", "", "least-squares step (thesis: point to point)",
+              choices=("point_to_point", "point_to_plane")),
         Param("min_fitness", float, 0.3, "", "apply only if this share of scan points found a partner", low=0.0,
               high=1.0),
         Param("max_shift", float, 0.01, "m", "apply only corrections that move the scan's centroid less", low=0.0),
@@ -167,7 +169,7 @@ class RegisterScan(ExploreBehaviour):
         registrar = self.context.registry.create(
             "registrar", "icp",
             {"radius": self.p["radius"], "iterations": self.p["iterations"],
-             "normal_gate_deg": self.p["normal_gate_deg"]},
+             "normal_gate_deg": self.p["normal_gate_deg"], "method": self.p["method"]},
             "register_scan", "params",
         )
         scan = self.read("scan")
