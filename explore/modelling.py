@@ -84,7 +84,18 @@ def resolve_strategy(strategy: Any, registry: Any) -> Any:
 
 
 class ModellingSession:
-    """World + free-flying sensor + strategy -> scans until termination -> metrics.
+    """World + robot + sensor + strategy -> planned, executed scans until termination -> metrics.
+
+    One iteration (:meth:`step`): :meth:`generate` candidates, :meth:`select` the best by
+    the utility, :meth:`terminate` (stop / switch to hole mode), :meth:`plan_best` (scan-path
+    IK in 10 mm portions, the PVS along the scan with the NBS rule, the approach motion by
+    the motion planner; the next best candidates when that fails), :meth:`execute` (approach
+    motion with positioning noise, collisions with the true world), :meth:`acquire` (scan
+    motion + scan), optionally :meth:`register` (local ICP), :meth:`integrate` (PVS, mesh,
+    features; appends the :class:`ScanRecord`). The first scan uses :meth:`plan_initial`.
+    A scan taken with :meth:`acquire` from a pose or scan path (no plan) puts the sensor
+    there, as before motion planning existed. Planning and execution numbers:
+    :meth:`motion_metrics`.
 
     Parameters
     ----------
@@ -251,7 +262,7 @@ class ModellingSession:
         (no robot motion; travel = straight distance, as the thesis' free-flying sensor).
         """
         if isinstance(target, ScanPlan):
-            executed, run = self.motion.execute_scan(target, self.n_scans)
+            executed, run = self.motion.execute_scan(target, self.n_scans + 1)
             self._pend_candidate(target.candidate)
             travel = self._pending["travel"] + (self.motion.motions[-1].sensor_path_m if run is not None else 0.0)
             if run is not None:
@@ -408,7 +419,7 @@ class ModellingSession:
         approach (the sensor is put at the scan start).
         """
         start = None if (self.n_scans == 0 and self.place_first) else np.asarray(self.robot.q, dtype=float)
-        return self.motion.plan(candidate, start, self.n_scans, use_pvs=self.n_scans > 0)
+        return self.motion.plan(candidate, start, self.n_scans + 1, use_pvs=self.n_scans > 0)
 
     def plan_initial(self) -> ScanPlan | None:
         """Plan the random initial scan, else the next side or edge of the region; None if none is reachable."""
@@ -472,7 +483,7 @@ class ModellingSession:
         A collision that stops the motion (robot ``on_collision: stop``) ends the session
         with status ``collided``.
         """
-        run = self.motion.execute_approach(plan, self.n_scans)
+        run = self.motion.execute_approach(plan, self.n_scans + 1)
         if run is not None:
             self._pending["travel"] = self.motion.motions[-1].sensor_path_m
             self._check_collision(run, "approach")

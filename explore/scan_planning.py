@@ -98,7 +98,7 @@ class ScanPlan:
 class PlanRecord:
     """One planning attempt (for the metrics ``planning_success`` and ``planning_time_s``)."""
 
-    scan: int
+    scan: int  # number (1-based) of the scan it was planned for
     source: str
     verdict: str
     seconds: float
@@ -109,7 +109,7 @@ class PlanRecord:
 class MotionRecord:
     """One executed motion (approach or scan) as ``robot.execute`` reported it."""
 
-    scan: int
+    scan: int  # number (1-based) of the scan it belongs to
     kind: str  # "approach" | "scan"
     steps: int
     duration_s: float
@@ -241,7 +241,7 @@ class ScanMotion:
         return str(getattr(self.planner, "name", type(self.planner).__name__))
 
     # -- planning -----------------------------------------------------------------------------
-    def plan(self, candidate: Candidate, start: Array | None, scan_index: int = 0, use_pvs: bool = True) -> ScanPlan:
+    def plan(self, candidate: Candidate, start: Array | None, scan_index: int = 1, use_pvs: bool = True) -> ScanPlan:
         """Scan reachability, the PVS along the scan (NBS rule), then the approach motion.
 
         ``start`` None places the robot at the scan start (no approach); ``use_pvs`` False

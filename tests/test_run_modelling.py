@@ -94,7 +94,7 @@ def test_positioning_noise_collision_stops_or_is_recorded(tmp_path, capsys) -> N
     assert stop["files"]["mesh"] is None and not (tmp_path / "stop" / "model.ply").exists()
     code, go_on, _ = _run([*args, "--set", "robot.on_collision=continue", "--out", str(tmp_path / "go")], capsys)
     assert code == 0 and go_on["collisions"] == 1 and go_on["trajectories"] == 1
-    assert go_on["collision_events"] == [{"scan": 0, "motion": "approach", "bodies": ["chair_1"], "completed": True}]
+    assert go_on["collision_events"] == [{"scan": 1, "motion": "approach", "bodies": ["chair_1"], "completed": True}]
 
 
 def test_unreachable_initial_scan_fails_with_metrics(tmp_path, capsys) -> None:
