@@ -223,7 +223,7 @@ class RunContext:
                 future.cancel()
         pending = [f for f in self._futures if not f.done()]
         if pending:  # a step that is running: let it end before the simulation goes away
-            wait(pending, timeout=60.0)
+            wait(pending, timeout=10.0)
         if self.rerun is not None:
             self.rerun.close()
         if not self._trace_file.closed:

@@ -274,10 +274,11 @@ class ScanMotion:
                 return ScanPlan(candidate, UNREACHABLE, "base heading outside the joint limits")
             configs = shifted
         if not all(problem.is_valid(q) for q in configs):
-            verdict = classify_blocked(robot, configs, self.pvs.probability, space_free=self.pvs.is_free)
-            if problem.space_free is not None and verdict == BLOCK_OCCUPIED:
+            verdict = (classify_blocked(robot, configs, self.pvs.probability, space_free=self.pvs.is_free)
+                       if problem.space_free is not None else None)
+            if verdict == BLOCK_OCCUPIED:
                 return ScanPlan(candidate, OCCUPIED, "the scan runs through occupied space", None, configs)
-            if problem.space_free is not None and verdict == BLOCK_UNKNOWN:
+            if verdict == BLOCK_UNKNOWN:
                 return ScanPlan(candidate, UNKNOWN, "the scan runs through unknown space", None, configs)
             return ScanPlan(candidate, UNREACHABLE, "the scan collides with the known environment", None, configs)
         plan = ScanPlan(candidate, OK, "placed at the scan start", None, configs,
