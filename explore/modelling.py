@@ -118,13 +118,15 @@ class ModellingSession:
     place_first : put the robot at the first scan instead of planning a motion to it (the
         thesis' free-flying sensor starts at its random initial scan path); None = only for
         the ``free_flyer`` robot
+    register_scans : :meth:`step` registers each scan to the model (:meth:`register`, the
+        thesis' local ICP) before integrating it, as the ``register_scan`` behaviour does
     """
 
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
                  max_scans: int = 30, planner: Any = None, continue_after_stop: bool = False,
                  pvs_params: dict | None = None, surface_params: dict | None = None,
                  fallback_generator: str | None = "sphere", noise: bool = True, max_plan_attempts: int = 10,
-                 place_first: bool | None = None) -> None:
+                 place_first: bool | None = None, register_scans: bool = False) -> None:
         from .pvs import PVS
         from .surface import SurfaceModel
 
@@ -166,6 +168,7 @@ class ModellingSession:
         self.selection_sizes: list[int] = []
         self._metrics = None
         self.max_plan_attempts = max(1, int(max_plan_attempts))
+        self.register_scans = bool(register_scans)
         self.place_first = (getattr(self.robot, "name", "") == "free_flyer") if place_first is None else place_first
         self.motion = ScanMotion(self.robot, self.pvs, make_planner(registry, self.robot, planner),
                                  np.random.default_rng(rng.integers(2**63)), int(rng.integers(1, 2**31 - 1)),
@@ -495,7 +498,10 @@ class ModellingSession:
             self.finish("collided", f"collision with {bodies} during the {kind} motion of scan {self.n_scans + 1}")
 
     def step(self) -> ScanRecord | None:
-        """One iteration: (generate, select, terminate,) plan, execute, acquire, integrate. None when finished."""
+        """One iteration: (generate, select, terminate,) plan, execute, acquire, (register,) integrate.
+
+        None when finished.
+        """
         if self.status != "running":
             return None
         if self.n_scans == 0:
@@ -528,6 +534,8 @@ class ModellingSession:
         scan, _, _ = self.acquire(plan)
         if self.status != "running":
             return None
+        if self.register_scans:
+            scan, _ = self.register(scan)
         self.integrate(scan)
         return self.records[-1]
 

@@ -46,6 +46,19 @@ def test_model_object_models_the_bunny_and_is_deterministic(tmp_path, capsys) ->
     events = [json.loads(line) for line in (run / "trace.jsonl").read_text().splitlines()]
     kinds = {e["event"] for e in events}
     assert {"start", "status", "decision", "scan", "motion", "registration", "integrated", "end"} <= kinds
+    # the tree adapter adds nothing: ModellingSession.step() from Python records the same
+    from explore.modelling import ModellingSession
+    from explore.registry import Registry
+    from explore.simulation import Simulation
+
+    registry = Registry.load()
+    with Simulation("bunny_pedestal", registry) as sim:
+        session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=0, max_scans=3, register_scans=True)
+        library = session.run().metrics
+    assert library["coverage"] == pytest.approx(curve, abs=1e-6)  # JSON keeps 6 decimals
+    assert library["coverage_estimate"] == pytest.approx(
+        first["coverage_estimate_per_scan"], abs=1e-6)
+    assert library["sources"] == first["sources"] and library["travel_m"] == pytest.approx(first["path_length_m"])
     # the same seed again, this time also logging to Rerun: identical metrics apart from timing
     rrd = tmp_path / "run.rrd"
     code, second, _ = _run([*base, "--out", str(tmp_path / "b"), "--rerun", str(rrd)], capsys)
