@@ -346,7 +346,8 @@ def _tick(config: RunConfig, registry: Any, context: RunContext, tree_file: Any,
             break
         context.wait_for_work(0.1)
     if root.status == Status.SUCCESS:
-        status, reason = "success", root.feedback_message or "tree succeeded"
+        ends = [getattr(p, "end_reason", "") for p in context.state.values()]
+        status, reason = "success", root.feedback_message or next((e for e in ends if e), "tree succeeded")
     elif root.status == Status.FAILURE:
         status, reason = "failure", _failure_reason(root)
     else:

@@ -129,6 +129,11 @@ class ModellingOutputs:
         session = self.session
         self.coverage.append(float(session.ground_truth().coverage(session.point_history[-1])))
 
+    @property
+    def end_reason(self) -> str:
+        """Why the modelling ended (the run's reason when the tree succeeds)."""
+        return str(self.session.reason)
+
     def live_stats(self) -> dict[str, Any]:
         s = self.session
         stats: dict[str, Any] = {"strategy": self.strategy, "scans": s.n_scans}
