@@ -388,10 +388,15 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     }
     options = {"strategy": "--strategy", "motion_planner": "--planner", "robot": "--robot", "sensor": "--sensor"}
     prefixes = {"strategy": "strategy", "motion_planner": "planner", "robot": "robot", "sensor": "sensor"}
+    given = {"strategy": config.strategy, "motion_planner": config.planner, "robot": config.robot,
+             "sensor": config.sensor}
     for kind, name in chosen.items():
         if name is None:
             continue
-        info = registry.get(kind, name, options[kind], None)
+        if given[kind] is not None or kind == "motion_planner":
+            info = registry.get(kind, name, options[kind], None)
+        else:  # the world's choice
+            info = registry.get(kind, name, str(spec.path), f"{prefixes[kind]}.plugin")
         scoped = config.scoped(prefixes[kind])
         if scoped:
             validate_params(info.params, scoped, "--set", f"{prefixes[kind]}.")
