@@ -17,6 +17,7 @@ from explore.candidates import (
     PlanningContext,
     RepairSettings,
     any_sweep,
+    clip_above,
     frame_from,
     make_target,
     repair,
@@ -126,6 +127,9 @@ class Sphere(ViewGenerator):
                 target: Any = ScanPath(start, end, speed)
             else:
                 target = pose
+            target = clip_above(target, ctx.lowest_sensor_z)  # objects cannot be viewed from below
+            if target is None:
+                continue
             out.append(Candidate(target, self.name, {"kind": "sphere", "index": index}, None, ctx.iteration))
         return out
 
@@ -163,6 +167,9 @@ class RandomViews(ViewGenerator):
                 start[:3, 3] -= half
                 end[:3, 3] += half
                 target = ScanPath(start, end, speed)
+            target = clip_above(target, ctx.lowest_sensor_z)
+            if target is None:
+                continue
             out.append(Candidate(target, self.name, {"kind": "random"}, None, ctx.iteration))
         return out
 
@@ -456,7 +463,7 @@ class HoleRescan(ViewGenerator):
         free = ~np.isfinite(t)
         eyes = centre + standoff * dirs
         free &= ~_env_blocked(ctx, eyes)
-        free &= eyes[:, 2] > ctx.region_min[2] - 0.02  # objects cannot be viewed from below
+        free &= eyes[:, 2] >= ctx.lowest_sensor_z  # objects cannot be viewed from below (Sec. 4.1)
         if not free.any():
             return None
         key = np.linalg.norm(normal - dirs[free], axis=1)
