@@ -275,6 +275,24 @@ def sample_positions(target: Pose | ScanPath, count: int = 5) -> Points3:
     return target.start[:3, 3] + s * (target.end[:3, 3] - target.start[:3, 3])
 
 
+def segments_hit_boxes(starts: Points3, ends: Points3, boxes: list[tuple[Array, Array]]) -> np.ndarray:
+    """Mask of the segments start->end that pass through any axis-aligned box (lo, hi) (slab test)."""
+    starts = np.asarray(starts, dtype=float).reshape(-1, 3)
+    delta = np.asarray(ends, dtype=float).reshape(-1, 3) - starts
+    hit = np.zeros(len(starts), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / delta
+        for lo, hi in boxes:
+            t1 = (np.asarray(lo) - starts) * inv
+            t2 = (np.asarray(hi) - starts) * inv
+            t1 = np.where(np.isnan(t1), -np.inf, t1)
+            t2 = np.where(np.isnan(t2), np.inf, t2)
+            enter = np.max(np.minimum(t1, t2), axis=1)
+            leave = np.min(np.maximum(t1, t2), axis=1)
+            hit |= (enter <= leave) & (leave >= 0.0) & (enter <= 1.0)
+    return hit
+
+
 def above_support(target: Pose | ScanPath, lowest_z: float) -> bool:
     """True if the sensor stays at or above ``lowest_z`` along the whole target (thesis Sec. 4.1)."""
     return bool(np.all(sample_positions(target, 2)[:, 2] >= lowest_z))
