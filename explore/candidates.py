@@ -59,6 +59,7 @@ class Candidate:
     created: int = 0
     score: float = float("nan")
     diagnostics: dict[str, float] = field(default_factory=dict)
+    beams_cache: Any = field(default=None, repr=False, compare=False)  # the utilities' simulated beams
 
     @property
     def pose(self) -> Pose:

@@ -15,6 +15,7 @@ import numpy as np
 from explore.candidates import Candidate, PlanningContext, collision_free_share
 from explore.params import Param
 from explore.scan import ScanPath
+from explore.typed import Points3
 from explore.visibility import (
     ACC_NAMES,
     ENTROPY,
@@ -58,17 +59,31 @@ class Utility:
         raise NotImplementedError
 
 
+def candidate_beams(sensor: Any, cand: Candidate, beam_stride: int, frame_spacing: float) -> tuple[Points3, Points3]:
+    """Origins and directions of one candidate's simulated beams, cached on the candidate.
+
+    Candidates are immutable once generated and persistent ones (the sphere) are scored in
+    every iteration, so the beams are computed once per (stride, spacing).
+    """
+    key = (beam_stride, frame_spacing)
+    cached = cand.beams_cache
+    if cached is not None and cached[0] == key:
+        return cached[1], cached[2]
+    stride = 1
+    if isinstance(cand.target, ScanPath):
+        per_frame = cand.target.speed / max(sensor.rate_hz, 1e-9)
+        stride = max(1, int(round(frame_spacing / max(per_frame, 1e-9))))
+    o, d, _ = sensor.beams(cand.target, beam_stride=beam_stride, frame_stride=stride)
+    cand.beams_cache = (key, o, d)
+    return o, d
+
+
 def beams_of(ctx: PlanningContext, candidates: list[Candidate], beam_stride: int,
              frame_spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Origins, directions and candidate index of the simulated beams of every candidate."""
-    sensor = ctx.sensor
     origins, dirs, groups = [], [], []
     for index, cand in enumerate(candidates):
-        stride = 1
-        if isinstance(cand.target, ScanPath):
-            per_frame = cand.target.speed / max(sensor.rate_hz, 1e-9)
-            stride = max(1, int(round(frame_spacing / max(per_frame, 1e-9))))
-        o, d, _ = sensor.beams(cand.target, beam_stride=beam_stride, frame_stride=stride)
+        o, d = candidate_beams(ctx.sensor, cand, beam_stride, frame_spacing)
         origins.append(o)
         dirs.append(d)
         groups.append(np.full(len(o), index, dtype=np.int64))
@@ -92,9 +107,9 @@ class RayUtility(Utility):
         origins, dirs, groups = beams_of(ctx, candidates, self.beam_stride, self.frame_spacing)
         sensor = ctx.sensor
         min_range = 0.0 if getattr(sensor, "clear_from_origin", True) else sensor.min_range
-        bundle = 1
+        per_frame = len(sensor.local_directions()[:: self.beam_stride])
         acc = trace(ctx.grid, origins, dirs, groups, len(candidates), min_range, sensor.max_range,
-                    self.settings(), bundle)
+                    self.settings(), per_frame)
         for cand, row in zip(candidates, acc, strict=True):
             cand.diagnostics.update({name: float(v) for name, v in zip(ACC_NAMES, row, strict=True)})
         return acc

@@ -97,7 +97,7 @@ def test_hierarchical_tracing_skips_only_free_bundles() -> None:
     )
     dirs = np.tile([1.0, 0.0, 0.0], (64, 1))
     fine = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0)[0]
-    coarse = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1), bundle=1)[0]
+    coarse = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1), beams_per_frame=8)[0]
     assert coarse[UNKNOWN] == pytest.approx(fine[UNKNOWN])
     free = VoxelGrid(np.full((16, 16, 16), 0.02, dtype=np.float32), np.zeros(3), RES)
     skipped = trace(free, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1))[0]
