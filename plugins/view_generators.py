@@ -433,6 +433,9 @@ class HoleRescan(ViewGenerator):
         Param("h_min", int, 5, "", "smallest hole in border edges [UNSPEC]", low=3),
         Param("h_max", int, 300, "", "largest hole in border edges (excludes the bottom opening) [UNSPEC]", low=3),
         Param("directions", int, 200, "", "directions sampled for the occlusion-free normal (Alg. 2)", low=8),
+        Param("p_block", float, 0.75, "", "voxels from this occupancy on occlude a direction (Alg. 2); "
+              "0.75 = the thesis' occupied class, so thin surfaces not yet at 0.95 still occlude",
+              low=0.5, high=1.0),
         Param("pick", float, 0.2, "", "lower_bound(front + pick (back - front)) of the free directions",
               low=0.0, high=1.0),
         Param("extend", float, 1.1, "", "path ends at c_h -/+ extend * d_h (Eq. 4.22-4.23)", low=0.1),
@@ -502,7 +505,7 @@ class HoleRescan(ViewGenerator):
         """
         dirs = fibonacci_sphere(self.directions)
         start = centre + 1.5 * ctx.grid.resolution * dirs
-        t = first_blocked(ctx.grid, start, dirs, standoff, p_block=0.95)
+        t = first_blocked(ctx.grid, start, dirs, standoff, p_block=self.p_block)
         free = ~np.isfinite(t)
         eyes = centre + standoff * dirs
         free &= ~_env_blocked(ctx, eyes)
@@ -552,13 +555,22 @@ class HoleRescan(ViewGenerator):
                     "holes": len(group), "edges": int(sum(h.size for h in group))}
             self._rims[(ctx.iteration, number)] = loop_pts
             tried = 0
-            for n_h in self.free_directions(ctx, centre, normal, standoff):
+            anchor = centre
+            directions = self.free_directions(ctx, centre, normal, standoff)
+            if len(directions) == 0:
+                ring = loop_pts[:: max(1, len(loop_pts) // 8)]
+                for point in centre + 0.5 * (ring - centre):
+                    directions = self.free_directions(ctx, point, normal, standoff)
+                    if len(directions):
+                        anchor = point
+                        break
+            for n_h in directions:
                 if tried >= self.max_directions:
                     break
                 if len(used) and np.max(used @ n_h) > np.cos(np.deg2rad(self.rescan_angle_deg)):
                     continue  # scanned from about here already
                 tried += 1
-                cand = self._candidate(ctx, centre, loop_pts, n_h, standoff, info)
+                cand = self._candidate(ctx, anchor, loop_pts, n_h, standoff, info)
                 if cand is not None:
                     out.append(cand)
                     break
