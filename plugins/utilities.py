@@ -39,7 +39,8 @@ RAY_PARAMS = (
     Param("beam_stride", int, 4, "", "use every n-th beam of a stripe / pixel (thesis: every 4th)", low=1),
     Param("frame_spacing", float, 0.006, "m", "distance between simulated stripes along a path", low=1e-4),
     Param("visited", bool, True, "", "count each voxel once per candidate (thesis visited marking)"),
-    Param("hierarchy", int, 0, "", "hierarchical ray tracing level a (0 = uniform; Vasquez-Gomez HRT)",
+    Param("hierarchy", int, 0, "",
+          "hierarchical ray tracing level a (0 = uniform; Vasquez-Gomez HRT: 2^a x 2^a bundles, coarse pass first)",
           low=0, high=4),
 )
 
@@ -174,7 +175,17 @@ class InformationGain(RayUtility):
 
 
 class IGQuality(RayUtility):
-    """IG/quality f = (1 - w) e_v + w (1 - q_s), w = n/(n + 5) (thesis Eq. 4.30-4.34; 'need' variant default)."""
+    """IG/quality f = (1 - w) e_v + w (1 - q_s), w = n/(n + 5) (thesis Eq. 4.30-4.34).
+
+    ``variant``: ``need`` (default) scores λ b_i + (1 − λ)(1 − d̄_i), i.e. rewards seeing voxels
+    with border edges and low density, as the thesis text intends; ``kriegel_literal`` is
+    Eq. 4.33/4.30 as printed, ω (1 − Σ(λ b_i + (1 − λ) d̄_i)/N_v), which penalises views of
+    border voxels. ``normalise``: ``max`` (default) divides each term by its maximum over
+    the candidates; ``n_v`` divides both by N_v as Eq. 4.32/4.34. On the bunny the entropy
+    sum spreads 300-600 times more across candidates than the quality sum, so with ``n_v``
+    ω cannot balance the two and IG/Quality acts as IG. Measurements of both options:
+    docs/results.md (Kriegel thesis Table 4.5).
+    """
 
     name = "ig_quality"
     params = RAY_PARAMS + (
