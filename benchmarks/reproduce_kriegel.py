@@ -195,13 +195,17 @@ def save_png(rows: list[dict], path: str, max_scans: int) -> None:
     worlds = list(dict.fromkeys(r["world"] for r in rows))
     fig, axes = plt.subplots(1, len(worlds), figsize=(6 * len(worlds), 4.5), dpi=110, squeeze=False)
     x = np.arange(1, max_scans + 1)
+    colours = {"random": "tab:gray", "ig": "tab:blue", "quality": "tab:green", "ig_quality": "tab:red"}
+    styles = {"sphere": ":", "bs": "--", "bs_hr": "-"}  # colour = selection, line = search
     for ax, world in zip(axes[0], worlds, strict=True):
         for r in (r for r in rows if r["world"] == world):
             curves = 100.0 * r["curves"]
             median = np.median(curves, axis=0)
             lo, hi = np.percentile(curves, [25, 75], axis=0)
-            line, = ax.plot(x, median, label=f"{r['strategy']} (ñ_s {r['median_scans']:.0f})")
-            ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.15)
+            selection, _, search = r["strategy"].partition("/")
+            line, = ax.plot(x, median, color=colours.get(selection), linestyle=styles.get(search, "-"),
+                            label=f"{r['strategy']} (ñ_s {r['median_scans']:.0f})")
+            ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.08)
         ax.set_title(f"{world} ({rows[0]['seeds']} seeds)")
         ax.set_xlabel("scans")
         ax.set_ylabel("c_a % (ground truth, τ = 3 mm)")
