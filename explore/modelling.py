@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from .candidates import STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext, frame_from
+from .metrics import GroundTruthMetrics, coverage_auc
 from .motion import Execution
 from .scan import Scan, ScanPath
 from .scan_planning import KEEP_FOR_LATER, ScanMotion, ScanPlan, make_planner
@@ -111,8 +112,9 @@ class ModellingSession:
         recording the scan count at which it did (the thesis' n_s); for benchmarks
     pvs_params, surface_params : extra keyword arguments of the PVS and the surface model
     fallback_generator : view generator used only when the strategy's generator leaves the
-        stack empty (so that a benchmark run can go on to ``max_scans``); None disables it.
-        Its candidates are recorded with their own source name.
+        stack empty and ``continue_after_stop`` is set (so a benchmark run can go on to
+        ``max_scans``); None (default) disables it. Its scans are recorded with the source
+        ``fallback_<name>`` and counted in ``metrics()["fallback_scans"]``.
     noise : execute motions with the robot's positioning noise model (Vasquez-Gomez Sec. A6)
     max_plan_attempts : candidates tried per iteration when planning the best one fails
     place_first : put the robot at the first scan instead of planning a motion to it (the
@@ -125,7 +127,7 @@ class ModellingSession:
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
                  max_scans: int = 30, planner: Any = None, continue_after_stop: bool = False,
                  pvs_params: dict | None = None, surface_params: dict | None = None,
-                 fallback_generator: str | None = "sphere", noise: bool = True, max_plan_attempts: int = 10,
+                 fallback_generator: str | None = None, noise: bool = True, max_plan_attempts: int = 10,
                  place_first: bool | None = None, register_scans: bool = False) -> None:
         from .pvs import PVS
         from .surface import SurfaceModel
@@ -166,7 +168,7 @@ class ModellingSession:
         self.first_stop_reason = ""
         self.selection_times: list[float] = []
         self.selection_sizes: list[int] = []
-        self._metrics = None
+        self._metrics: GroundTruthMetrics | None = None
         self.max_plan_attempts = max(1, int(max_plan_attempts))
         self.register_scans = bool(register_scans)
         self.place_first = (getattr(self.robot, "name", "") == "free_flyer") if place_first is None else place_first
@@ -561,9 +563,10 @@ class ModellingSession:
         return ModellingResult(self.status, self.reason, self.records, self.metrics())
 
     # -- evaluation (the only place that reads the ground truth) -------------------------
-    def ground_truth(self) -> Any:
+    def ground_truth(self) -> GroundTruthMetrics:
+        """The ground-truth evaluator of this world (observable surface computed once)."""
         if self._metrics is None:
-            self._metrics = GroundTruth(self.sim)
+            self._metrics = GroundTruthMetrics(self.sim)
         return self._metrics
 
     def coverage_curve(self) -> list[float]:
@@ -572,11 +575,29 @@ class ModellingSession:
         return [gt.coverage(points) for points in self.point_history]
 
     def metrics(self, ground_truth: bool = True) -> dict[str, Any]:
-        """Scans, c_a and ĉ_m per scan, density, path lengths, selection times, status."""
+        """Scans, c_a and ĉ_m per scan, RMS error, Chamfer distance, coverage AUC, path lengths,
+        selection times, status.
+
+        ``rms_error_m`` / ``chamfer_m`` are of the final reconstruction (``*_at_stop_m`` at the
+        scan n_s the termination first said stop); ``coverage_auc`` is the mean c_a over
+        ``max_scans`` scans (a run that ended early keeps its last value). Scans that came
+        from the session's fallback generator are counted in ``fallback_scans``.
+        """
         curve = self.coverage_curve() if ground_truth and self.point_history else []
         for record, value in zip(self.records, curve, strict=False):
             record.coverage = value
         n_s = self.first_stop if self.first_stop is not None else self.n_scans
+        quality: dict[str, float] = {}
+        if curve:
+            gt = self.ground_truth()
+            final = gt.evaluate(self.point_history[-1])
+            at_stop = gt.evaluate(self.point_history[max(n_s, 1) - 1])
+            quality = {
+                "rms_error_m": final["rms_error"], "chamfer_m": final["chamfer"],
+                "rms_error_at_stop_m": at_stop["rms_error"], "chamfer_at_stop_m": at_stop["chamfer"],
+                "coverage_auc": coverage_auc(curve, self.max_scans),
+            }
+        fallback = sum(r.source.startswith("fallback_") for r in self.records)
         return {
             "strategy": self.strategy.name,
             "world": self.sim.spec.name,
@@ -588,6 +609,7 @@ class ModellingSession:
             "reason": self.reason,
             "coverage": curve,
             "coverage_at_stop": curve[n_s - 1] if curve and n_s >= 1 else float("nan"),
+            **quality,
             "coverage_estimate": [r.coverage_estimate for r in self.records],
             "coverage_border": [r.coverage_border for r in self.records],
             "density": [r.density for r in self.records],
@@ -597,6 +619,7 @@ class ModellingSession:
             "selection_s": list(self.selection_times),
             "selection_candidates": list(self.selection_sizes),
             "sources": [r.source for r in self.records],
+            "fallback_scans": int(fallback),
         }
 
 
@@ -608,45 +631,3 @@ def _failure_summary(what: str, failures: list[ScanPlan]) -> str:
     detail = ", ".join(f"{n} {verdict}" for verdict, n in counts.items())
     return f"{len(failures)} {what} tried: {detail}" if failures else f"no {what}"
 
-
-class GroundTruth:
-    """c_a of a surface model against the object's ground truth (via :mod:`explore.metrics` when present)."""
-
-    def __init__(self, sim: Any, tau: float = 0.003) -> None:
-        self.tau = tau
-        self.impl = None
-        try:
-            from .metrics import GroundTruthMetrics
-
-            self.impl = GroundTruthMetrics(sim, tau=tau)
-        except ImportError:
-            self.impl = None
-        if self.impl is None:
-            self._fallback(sim)
-
-    def _fallback(self, sim: Any) -> None:
-        """Dense samples of the object surface above the support (no visibility test)."""
-        from scipy.spatial import cKDTree
-
-        mesh = sim.object_mesh()
-        tri = mesh.vertices[mesh.triangles]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        rng = np.random.default_rng(0)
-        count = int(min(60000, max(2000, area.sum() / (0.0015**2))))
-        pick = rng.choice(len(tri), count, p=area / area.sum())
-        u, v = rng.random((2, count))
-        flip = u + v > 1
-        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-        pts = tri[pick, 0] + u[:, None] * (tri[pick, 1] - tri[pick, 0]) + v[:, None] * (tri[pick, 2] - tri[pick, 0])
-        floor = sim.spec.region_min[2] + 0.004
-        self.samples = pts[pts[:, 2] > floor]
-        self._tree = cKDTree
-
-    def coverage(self, points: Any) -> float:
-        points = np.asarray(points, dtype=float).reshape(-1, 3)
-        if self.impl is not None:
-            return float(self.impl.coverage(points))
-        if len(points) == 0:
-            return 0.0
-        dist, _ = self._tree(points).query(self.samples, distance_upper_bound=self.tau)
-        return float(np.mean(np.isfinite(dist)))

@@ -29,6 +29,8 @@ class StartModelling(ExploreBehaviour):
         Param("max_scans", int, 30, "", "scan budget (overridden by --max-scans)", low=1),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise model"),
         Param("max_plan_attempts", int, 10, "", "candidates tried per scan when planning the best fails", low=1),
+        Param("fallback", str, "sphere", "", "view generator tried when no candidate of the strategy can be "
+              "reached (robots with a limited workspace); empty = none"),
     )
 
     def work(self) -> Outcome:
@@ -49,6 +51,7 @@ class StartModelling(ExploreBehaviour):
             planner=(config.planner, config.scoped("planner")),
             noise=self.p["noise"],
             max_plan_attempts=self.p["max_plan_attempts"],
+            fallback_generator=self.p["fallback"] or None,
         )
         ctx.state["modelling"] = ModellingOutputs(session, strategy_name, ctx)
         self.write("modelling", session)
