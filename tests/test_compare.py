@@ -500,3 +500,46 @@ def test_step_times_count_only_leaf_behaviours(tmp_path) -> None:
     trace = tmp_path / "trace.jsonl"
     trace.write_text("\n".join(json.dumps({"t": t, "event": "status", "node": n, "status": s}) for n, s, t in events))
     assert step_times(trace) == pytest.approx({"Scan": 2.5, "Plan": 0.5})
+
+
+@pytest.mark.slow
+def test_real_model_object_grid_matches_its_runs_and_a_rerun(tmp_path) -> None:
+    """No test plugins: the model_object tree with the free flyer, 2 worlds x 2 strategies x
+    2 planners, 2 scans each. Every CSV row equals its run's metrics.json; the planner table
+    carries the runs' real planning numbers; an ``explore run`` of one cell with the same seed
+    gives the same coverage curve (same seeds, same results)."""
+    out = tmp_path / "real"
+    args = [str(EXPLORE), "compare", "--tree", "model_object", "--worlds", "bunny_pedestal,duck_pedestal",
+            "--strategies", "ig_quality/bs_hr,random/sphere", "--planners", "straight_line,rrt_connect",
+            "--seeds", "1", "--max-scans", "2", "--jobs", "2", "--out", str(out)]
+    done = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = csv_rows(out)
+    assert len(rows) == 8 and {r["status"] for r in rows} == {"success"}
+    assert {(r["world"], r["strategy"], r["planner"]) for r in rows} == {
+        (w, s, p) for w in ("bunny_pedestal", "duck_pedestal") for s in ("ig_quality/bs_hr", "random/sphere")
+        for p in ("straight_line", "rrt_connect")}
+    for row in rows:
+        metrics = json.loads((out / "runs" / row["run_id"] / "metrics.json").read_text())
+        assert row["scans"] == metrics["scans"] == 2
+        assert row["coverage_per_scan"] == pytest.approx(metrics["coverage_per_scan"], abs=1e-6)
+        assert 0.2 < row["coverage_per_scan"][0] < row["coverage_per_scan"][1] <= 1.0  # real, rising coverage
+        assert row["planning_success"] == pytest.approx(metrics["planning_success"])
+        assert row["path_length_m"] == pytest.approx(metrics["path_length_m"]) and row["path_length_m"] > 0.0
+    summary = json.loads((out / "summary.json").read_text())
+    planners = {(v["world"], v["planner"]): v for v in summary["planners"]["rows"]}
+    assert set(planners) == {(w, p) for w in ("bunny_pedestal", "duck_pedestal")
+                             for p in ("straight_line", "rrt_connect")}
+    for (world, planner), value in planners.items():
+        group = [r for r in rows if r["world"] == world and r["planner"] == planner]
+        assert value["runs"] == 2 and value["run_success"] == 1.0
+        assert value["planning_success"] == pytest.approx(np.mean([r["planning_success"] for r in group]))
+    cell = next(r for r in rows if r["world"] == "duck_pedestal" and r["strategy"] == "ig_quality/bs_hr"
+                and r["planner"] == "rrt_connect")
+    again = subprocess.run([str(EXPLORE), "run", "model_object", "--world", "duck_pedestal", "--strategy",
+                            "ig_quality/bs_hr", "--planner", "rrt_connect", "--seed", "0", "--max-scans", "2",
+                            "--out", str(tmp_path / "again")], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stdout + again.stderr
+    alone = json.loads((tmp_path / "again" / "metrics.json").read_text())
+    assert alone["coverage_per_scan"] == pytest.approx(cell["coverage_per_scan"], abs=1e-6)
+    assert alone["path_length_m"] == pytest.approx(cell["path_length_m"], abs=1e-6)
