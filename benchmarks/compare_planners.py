@@ -15,8 +15,9 @@ same command resumes::
 
 from __future__ import annotations
 
-import argparse
 import sys
+
+import compare_grid
 
 QUICK_PLANNERS = ["rrt_connect", "straight_line"]
 FULL_PLANNERS = ["rrt_connect", "rrt_star", "prm", "bit_star", "straight_line"]
@@ -29,39 +30,17 @@ def shipped_worlds() -> list[str]:
     return [p.stem for p in list_worlds()]
 
 
-def arguments(argv: list[str] | None = None) -> list[str]:
-    """The ``explore compare`` arguments of the chosen grid."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--full", action="store_true", help="all shipped worlds, 5 planners, 5 seeds, 10 scans")
-    parser.add_argument("--seeds", type=int, help="override the number of seeds")
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--executor", default="local")
-    parser.add_argument("--ray-address")
-    parser.add_argument("--out", default=None)
-    parser.add_argument("--dry-run", action="store_true", help="only print the command")
-    args, extra = parser.parse_known_args(argv)
-    worlds = shipped_worlds() if args.full else ["bunny_pedestal", "duck_pedestal"]
-    planners = FULL_PLANNERS if args.full else QUICK_PLANNERS
-    command = [
-        "compare", "--tree", "model_object", "--worlds", ",".join(worlds), "--strategies", STRATEGY,
-        "--planners", ",".join(planners), "--seeds", str(args.seeds or (5 if args.full else 2)),
-        "--max-scans", "10" if args.full else "4", "--jobs", str(args.jobs), "--executor", args.executor,
-        "--timeout", "3600", "--out", args.out or f"runs/compare_planners_{'full' if args.full else 'quick'}",
-    ]
-    if args.ray_address:
-        command += ["--ray-address", args.ray_address]
-    command += [a for a in extra if a != "--"]
-    return ["--dry-run", *command] if args.dry_run else command
-
-
 def main(argv: list[str] | None = None) -> int:
-    command = arguments(argv)
-    print("explore " + " ".join(a for a in command if a != "--dry-run"))
-    if command[0] == "--dry-run":
-        return 0
-    from explore_cli.main import main as explore
-
-    return explore(command)
+    parser = compare_grid.parser(__doc__, "all shipped worlds, 5 planners, 5 seeds, 10 scans")
+    args, extra = parser.parse_known_args(argv)
+    command = compare_grid.compare_command(
+        args, extra, tree="model_object",
+        worlds=shipped_worlds() if args.full else ["bunny_pedestal", "duck_pedestal"],
+        strategies=[STRATEGY], planners=FULL_PLANNERS if args.full else QUICK_PLANNERS,
+        seeds=5 if args.full else 2, max_scans=10 if args.full else 4,
+        out=f"runs/compare_planners_{'full' if args.full else 'quick'}",
+    )
+    return compare_grid.run(command, args.dry_run)
 
 
 if __name__ == "__main__":

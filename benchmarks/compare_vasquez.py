@@ -19,8 +19,9 @@ compare``; re-running the same command resumes::
 
 from __future__ import annotations
 
-import argparse
 import sys
+
+import compare_grid
 
 WORLD = "cluttered"
 
@@ -33,37 +34,15 @@ def strategies() -> list[str]:
     return sorted(names, key=lambda n: (n != "vasquez/du", n))
 
 
-def arguments(argv: list[str] | None = None) -> list[str]:
-    """The ``explore compare`` arguments of the chosen grid."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--full", action="store_true", help="10 seeds, 12 views")
-    parser.add_argument("--seeds", type=int, help="override the number of seeds")
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--executor", default="local")
-    parser.add_argument("--ray-address")
-    parser.add_argument("--out", default=None)
-    parser.add_argument("--dry-run", action="store_true", help="only print the command")
-    args, extra = parser.parse_known_args(argv)
-    command = [
-        "compare", "--tree", "nbvs_mobile", "--worlds", WORLD, "--strategies", ",".join(strategies()),
-        "--seeds", str(args.seeds or (10 if args.full else 3)), "--max-scans", "12" if args.full else "6",
-        "--jobs", str(args.jobs), "--executor", args.executor, "--timeout", "7200",
-        "--out", args.out or f"runs/compare_vasquez_{'full' if args.full else 'quick'}",
-    ]
-    if args.ray_address:
-        command += ["--ray-address", args.ray_address]
-    command += [a for a in extra if a != "--"]
-    return ["--dry-run", *command] if args.dry_run else command
-
-
 def main(argv: list[str] | None = None) -> int:
-    command = arguments(argv)
-    print("explore " + " ".join(a for a in command if a != "--dry-run"))
-    if command[0] == "--dry-run":
-        return 0
-    from explore_cli.main import main as explore
-
-    return explore(command)
+    parser = compare_grid.parser(__doc__, "10 seeds, 12 views")
+    args, extra = parser.parse_known_args(argv)
+    command = compare_grid.compare_command(
+        args, extra, tree="nbvs_mobile", worlds=[WORLD], strategies=strategies(),
+        seeds=10 if args.full else 3, max_scans=12 if args.full else 6, timeout=7200,
+        out=f"runs/compare_vasquez_{'full' if args.full else 'quick'}",
+    )
+    return compare_grid.run(command, args.dry_run)
 
 
 if __name__ == "__main__":
