@@ -107,7 +107,7 @@ class ModellingSession:
     resolution : PVS voxel edge l_v (thesis: 5 mm)
     max_scans : hard cap on the scans (the thesis runs 30 regardless of the termination)
     planner : motion planner: plugin name, (name or None, params), plugin object, or None for
-        the robot's default (``straight_line`` for the free flyer, ``rrt_connect`` otherwise)
+        ``rrt_connect`` (straight line first; around the PVS's unknown space when that is blocked)
     continue_after_stop : keep scanning to ``max_scans`` after the termination said stop,
         recording the scan count at which it did (the thesis' n_s); for benchmarks
     pvs_params, surface_params : extra keyword arguments of the PVS and the surface model

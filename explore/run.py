@@ -372,7 +372,7 @@ def _remove_run_files(out_dir: Path, created: bool) -> None:
 def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     """Everything that can be checked before a run starts: the tree, the world, plugin names,
     ``--set`` keys and plugin parameters, the Rerun file. Raises :class:`BadInput`."""
-    from .scan_planning import DEFAULT_PLANNERS
+    from .scan_planning import DEFAULT_PLANNER
     from .trees import load_tree
     from .world import load_world_spec
 
@@ -382,7 +382,7 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     robot = config.robot or spec.robot.plugin
     chosen = {
         "strategy": config.strategy,
-        "motion_planner": config.planner or DEFAULT_PLANNERS.get(robot, "rrt_connect"),
+        "motion_planner": config.planner or DEFAULT_PLANNER,
         "robot": robot,
         "sensor": config.sensor or spec.sensor.plugin,
     }

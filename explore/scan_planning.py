@@ -58,7 +58,7 @@ from .typed import Array, Pose
 
 OK, UNREACHABLE, OCCUPIED, UNKNOWN, NO_PATH = "ok", "unreachable", "occupied", "unknown", "no_path"
 KEEP_FOR_LATER = (UNKNOWN, NO_PATH)  # verdicts that leave the candidate on the stack
-DEFAULT_PLANNERS = {"free_flyer": "straight_line"}  # every other robot: rrt_connect (with try_direct)
+DEFAULT_PLANNER = "rrt_connect"  # tries the straight line first (try_direct), plans around what blocks it
 
 
 @dataclass
@@ -427,13 +427,13 @@ def _wrap(angle: float) -> float:
 def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--planner") -> Any:
     """A motion-planner plugin from a name, (name or None, params), an object, or None.
 
-    A missing name means the robot's default (:data:`DEFAULT_PLANNERS`, else ``rrt_connect``).
+    A missing name means :data:`DEFAULT_PLANNER`.
     """
     params: dict = {}
     if isinstance(planner, tuple):
         planner, params = planner
     if planner is None:
-        planner = DEFAULT_PLANNERS.get(getattr(robot, "name", ""), "rrt_connect")
+        planner = DEFAULT_PLANNER
     if isinstance(planner, str):
         return registry.create("motion_planner", planner, params or {}, source, "planner")
     return planner
