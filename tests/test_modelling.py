@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -157,7 +158,8 @@ def build_backend_offline() -> bool:
 @pytest.mark.slow
 def test_example_plugin_package_is_found_and_runs(tmp_path: Path) -> None:
     """pip-install the example package into a folder on PYTHONPATH, then list and run its strategy."""
-    package = ROOT / "plugins" / "examples" / "explore_example_strategy"
+    package = tmp_path / "explore_example_strategy"  # a copy: building leaves build/ next to the sources
+    shutil.copytree(ROOT / "plugins" / "examples" / "explore_example_strategy", package)
     target = tmp_path / "site"
     build = ["--no-build-isolation"] if build_backend_offline() else []  # else pip fetches setuptools + wheel
     out = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
