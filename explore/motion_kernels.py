@@ -8,6 +8,19 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _gap(v: float, lo: float, hi: float) -> float:
+    """Distance from ``v`` to the interval [lo, hi] (0 inside)."""
+    return lo - v if v < lo else (v - hi if v > hi else 0.0)
+
+
+@njit(cache=True, inline="always")
+def _box_sq_distance(x: float, y: float, z: float, lo: np.ndarray, hi: np.ndarray, b: int) -> float:
+    """Squared distance from a point to box ``b`` of [lo, hi] (0 inside)."""
+    gx, gy, gz = _gap(x, lo[b, 0], hi[b, 0]), _gap(y, lo[b, 1], hi[b, 1]), _gap(z, lo[b, 2], hi[b, 2])
+    return gx * gx + gy * gy + gz * gz
+
+
 @njit(cache=True)
 def planar_points_clearance(
     local: np.ndarray, z: np.ndarray, radius: float, x: float, y: float, theta: float, lo: np.ndarray,
@@ -24,8 +37,7 @@ def planar_points_clearance(
     near = np.empty(lo.shape[0], dtype=np.int64)
     count = 0
     for b in range(lo.shape[0]):
-        gx = lo[b, 0] - x if x < lo[b, 0] else (x - hi[b, 0] if x > hi[b, 0] else 0.0)
-        gy = lo[b, 1] - y if y < lo[b, 1] else (y - hi[b, 1] if y > hi[b, 1] else 0.0)
+        gx, gy = _gap(x, lo[b, 0], hi[b, 0]), _gap(y, lo[b, 1], hi[b, 1])
         if gx * gx + gy * gy <= (radius + reach) ** 2:
             near[count] = b
             count += 1
@@ -37,13 +49,7 @@ def planar_points_clearance(
         pz = z[i]
         out[i, 0], out[i, 1], out[i, 2] = px, py, pz
         for k in range(count):
-            b = near[k]
-            g = lo[b, 0] - px if px < lo[b, 0] else (px - hi[b, 0] if px > hi[b, 0] else 0.0)
-            d = g * g
-            g = lo[b, 1] - py if py < lo[b, 1] else (py - hi[b, 1] if py > hi[b, 1] else 0.0)
-            d += g * g
-            g = lo[b, 2] - pz if pz < lo[b, 2] else (pz - hi[b, 2] if pz > hi[b, 2] else 0.0)
-            d += g * g
+            d = _box_sq_distance(px, py, pz, lo, hi, near[k])
             if d < best:
                 best = d
         if box_lo[0] <= px <= box_hi[0] and box_lo[1] <= py <= box_hi[1] and box_lo[2] <= pz <= box_hi[2]:
@@ -63,12 +69,7 @@ def point_clearance(
     """
     best = np.inf
     for b in range(lo.shape[0]):
-        g = lo[b, 0] - x if x < lo[b, 0] else (x - hi[b, 0] if x > hi[b, 0] else 0.0)
-        d = g * g
-        g = lo[b, 1] - y if y < lo[b, 1] else (y - hi[b, 1] if y > hi[b, 1] else 0.0)
-        d += g * g
-        g = lo[b, 2] - z if z < lo[b, 2] else (z - hi[b, 2] if z > hi[b, 2] else 0.0)
-        d += g * g
+        d = _box_sq_distance(x, y, z, lo, hi, b)
         if d > 0.0:
             signed = math.sqrt(d)
         else:  # inside: minus the depth below the nearest face
@@ -84,9 +85,8 @@ def point_clearance(
         if 0 <= ix < field.shape[0] and 0 <= iy < field.shape[1] and 0 <= iz < field.shape[2]:
             pvs = field[ix, iy, iz] - half_diagonal
         else:
-            gx = grid_lo[0] - x if x < grid_lo[0] else (x - grid_hi[0] if x > grid_hi[0] else 0.0)
-            gy = grid_lo[1] - y if y < grid_lo[1] else (y - grid_hi[1] if y > grid_hi[1] else 0.0)
-            gz = grid_lo[2] - z if z < grid_lo[2] else (z - grid_hi[2] if z > grid_hi[2] else 0.0)
+            gx, gy = _gap(x, grid_lo[0], grid_hi[0]), _gap(y, grid_lo[1], grid_hi[1])
+            gz = _gap(z, grid_lo[2], grid_hi[2])
             pvs = math.sqrt(gx * gx + gy * gy + gz * gz)
         if pvs < out:
             out = pvs

@@ -30,7 +30,7 @@ def endpoints(workcell):
 @pytest.mark.parametrize("name", ["rrt_connect", "prm", "bit_star"])
 def test_planner_paths_are_collision_free_when_densely_rechecked(registry, workcell, endpoints, name) -> None:
     problem = MotionProblem(workcell.robot)
-    planner = registry.get("motion_planner", name).create({"time_limit": 1.0, "try_direct": False})
+    planner = registry.get("motion_planner", name).create({"time_limit": 3.0, "try_direct": False})
     plan = planner.plan(problem, *endpoints, seed=1)
     assert plan is not None
     assert np.allclose(plan.path[0], endpoints[0]) and np.allclose(plan.path[-1], endpoints[1])
@@ -109,7 +109,7 @@ def test_kinodynamic_base_plan_gives_controls_that_reach_the_goal(registry) -> N
         goal = start.copy()
         goal[:3] = (0.6, 0.3, 0.5)
         goal[3] = 0.3
-        planner = registry.get("motion_planner", "kinodynamic").create({"time_limit": 5.0, "goal_tolerance": 0.1})
+        planner = registry.get("motion_planner", "kinodynamic").create({"time_limit": 20.0, "goal_tolerance": 0.1})
         plan = planner.plan(problem, start, goal, seed=2)
         assert plan is not None and plan.controls is not None
         assert validate_path(problem, plan.path, resolution=problem.resolution / 10, margin=0.0) is None
