@@ -47,7 +47,9 @@ DEFAULT = "default"  # column value when the tree's / world's default is used
 ID_COLUMNS = ("run_id", "world", "strategy", "planner", "robot", "seed", "status", "reason")
 METRIC_COLUMNS = (
     "scans",
+    "n_s",
     "coverage",
+    "coverage_at_stop",
     "coverage_estimate",
     "path_length_m",
     "selection_s_mean",

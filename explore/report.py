@@ -86,6 +86,13 @@ def _values(rows: Sequence[dict[str, Any]], key: str) -> np.ndarray:
     return data[np.isfinite(data)]
 
 
+def _values_or(rows: Sequence[dict[str, Any]], key: str, fallback: str) -> np.ndarray:
+    """``key`` of each row, ``fallback`` where the row has no number for it."""
+    data = np.array([_num(r.get(key)) if math.isfinite(_num(r.get(key))) else _num(r.get(fallback)) for r in rows],
+                    dtype=float)
+    return data[np.isfinite(data)]
+
+
 def mean(data: np.ndarray) -> float:
     return float(np.mean(data)) if len(data) else math.nan
 
@@ -164,12 +171,14 @@ def kriegel_tables(rows: Sequence[dict[str, Any]], n_at: int) -> list[Table]:
     tables: dict[str, Table] = {}
     for world, method, members in groups(rows):
         done = [r for r in members if r.get("status") in FINISHED]
-        scans = _values(done, "scans")
+        # n_s: where the termination first said stop (runs that scan on to the budget record it)
+        scans = _values_or(done, "n_s", "scans")
+        at_stop = _values_or(done, "coverage_at_stop", "coverage")
         cov_n = np.array([coverage_at(r, n_at) for r in done], dtype=float)
         cov_n = cov_n[np.isfinite(cov_n)]
         value = {
             "world": world, "method": method, "n": len(done), "median_scans": median(scans), "notch": notch(scans),
-            "coverage_at_termination": mean(_values(done, "coverage")), "coverage_at_n": mean(cov_n),
+            "coverage_at_termination": mean(at_stop), "coverage_at_n": mean(cov_n),
             "path_length_m": mean(_values(done, "path_length_m")),
             "selection_s": mean(_values(done, "selection_s_mean")),
         }

@@ -200,6 +200,7 @@ class ModellingOutputs:
             "selection_s_mean": float(np.mean(selection)) if selection else None,
             "selection_s_per_scan": selection,
             "n_s": metrics.get("n_s"),
+            "coverage_at_stop": metrics.get("coverage_at_stop"),
             "stop_reason": metrics.get("stop_reason"),
             "sources": metrics.get("sources"),
             **motion,

@@ -30,7 +30,9 @@ class StartModelling(ExploreBehaviour):
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise model"),
         Param("max_plan_attempts", int, 10, "", "candidates tried per scan when planning the best fails", low=1),
         Param("fallback", str, "sphere", "", "view generator tried when no candidate of the strategy can be "
-              "reached (robots with a limited workspace); empty = none"),
+              "reached (robots with a limited workspace); none = no fallback"),
+        Param("continue_after_stop", bool, False, "", "scan on to the budget after the termination said stop "
+              "(thesis Table 4.5: n_s is where it first did, c_a(30) after the budget)"),
     )
 
     def work(self) -> Outcome:
@@ -51,7 +53,8 @@ class StartModelling(ExploreBehaviour):
             planner=(config.planner, config.scoped("planner")),
             noise=self.p["noise"],
             max_plan_attempts=self.p["max_plan_attempts"],
-            fallback_generator=self.p["fallback"] or None,
+            fallback_generator=None if self.p["fallback"] in ("", "none") else self.p["fallback"],
+            continue_after_stop=self.p["continue_after_stop"],
         )
         ctx.state["modelling"] = ModellingOutputs(session, strategy_name, ctx)
         self.write("modelling", session)
@@ -268,6 +271,10 @@ class CheckTermination(ExploreBehaviour):
         session = self.read("modelling")
         decision = session.terminate()
         self.context.trace("decision", what="termination", action=decision.action, reason=decision.reason)
+        if decision.stop and session.first_stop is None:
+            session.first_stop, session.first_stop_reason = session.n_scans, decision.reason
+        if decision.stop and session.continue_after_stop and session.n_scans < session.max_scans:
+            return success(f"n_s = {session.first_stop} ({session.first_stop_reason}); scanning on")
         if decision.stop:
             session.finish("stopped", decision.reason)
             self.write("done", True)
