@@ -35,8 +35,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 PLANNERS_QUICK = ("rrt_connect", "rrt", "prm", "kpiece", "bit_star", "rrt_star")
 PLANNERS_FULL = PLANNERS_QUICK + ("bkpiece", "fmt", "informed_rrt_star")  # lazy_prm: not in ompl 2.0.1's wheel
-WORLDS = (("workcell", False), ("cluttered", True), ("two_tables", True), ("bunny_pedestal", False),
-          ("tabletop", False))
+WORLDS = ("workcell", "cluttered", "two_tables", "bunny_pedestal", "tabletop")
 
 
 def view_poses(sim: Any, count: int, rng: np.random.Generator) -> list[np.ndarray]:
@@ -106,7 +105,7 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
     registry = Registry.load()
     rows = []
     count = count or (30 if full else 15)
-    for world, _mobile in WORLDS:
+    for world in WORLDS:
         if worlds and world not in worlds:
             continue
         with Simulation(world, registry) as sim:
@@ -127,6 +126,7 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
             for name in names:
                 if planners and name not in planners:
                     continue
+                label = name
                 limit = 1.0
                 params: dict[str, Any] = {"time_limit": limit, "try_direct": False}
                 if name == "straight_line":
@@ -153,9 +153,6 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
                     run = robot.execute(plan, np.random.default_rng(index), noise=True, world="true")
                     executed += 1
                     collided += int(run.collided)
-                label = name if "planner" not in params or name == "ompl" else f"{name}_{params['planner']}"
-                if name == "ompl":
-                    label = params["planner"]
                 row = {
                     "part": "planners", "world": world, "robot": robot.name, "planner": label,
                     "queries": len(queries), "time_limit_s": limit if name != "straight_line" else None,
@@ -197,7 +194,10 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
     if runs_file and os.path.exists(runs_file):
         with open(runs_file, encoding="utf-8") as handle:
             for line in handle:
-                run = json.loads(line)
+                try:
+                    run = json.loads(line)
+                except json.JSONDecodeError:  # a line cut short by an interrupt: that run is repeated
+                    continue
                 done[(run["approach"], run["k"], run["seed"], run["max_views"])] = run
     rows = []
     for approach, expected, k, noise in configs:
@@ -279,6 +279,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--approaches", default="", help="subset of DU,DU-MU,EU-MU")
     parser.add_argument("--runs-file", default=None, help="JSON lines of finished NBVS runs (resume)")
     args = parser.parse_args(argv)
+    worlds = tuple(w for w in args.worlds.split(",") if w)
+    if set(worlds) - set(WORLDS):
+        parser.error(f"--worlds: unknown {sorted(set(worlds) - set(WORLDS))} (valid: {', '.join(WORLDS)})")
+    try:
+        ks = tuple(int(k) for k in args.ks.split(",") if k)
+    except ValueError:
+        parser.error(f"--ks: comma-separated integers expected, got {args.ks!r}")
 
     def log(line: str) -> None:
         if not args.json:
@@ -286,10 +293,10 @@ def main(argv: list[str] | None = None) -> int:
 
     rows: list[dict[str, Any]] = []
     if args.part in ("all", "planners"):
-        rows += planner_rows(args.full, log, tuple(w for w in args.worlds.split(",") if w),
+        rows += planner_rows(args.full, log, worlds,
                              tuple(p for p in args.planners.split(",") if p), args.queries)
     if args.part in ("all", "nbvs"):
-        rows += nbvs_rows(args.full, log, args.seeds, tuple(int(k) for k in args.ks.split(",") if k), args.views,
+        rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,
                           args.runs_file, tuple(a for a in args.approaches.split(",") if a))
     if args.json:
         print(json.dumps(rows, indent=1))

@@ -401,12 +401,12 @@ def _bisection_order(n: int) -> list[int]:
     step = n - 1
     while step > 1:
         half = step // 2
-        for index in builtins_range(half, n - 1, step):
+        for index in range(half, n - 1, step):
             if index not in seen:
                 seen.add(index)
                 order.append(index)
         step = half
-    order.extend(i for i in builtins_range(n) if i not in seen)
+    order.extend(i for i in range(n) if i not in seen)
     return order
 
 
@@ -580,8 +580,8 @@ def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int,
 
     class Validator(ob.MotionValidator):
         def checkMotion(self, a: Any, b: Any, *last_valid: Any) -> bool:  # noqa: N802 - OMPL's name
-            qa = [a[i] for i in builtins_range(n)]
-            qb = [b[i] for i in builtins_range(n)]
+            qa = [a[i] for i in range(n)]
+            qb = [b[i] for i in range(n)]
             path = problem.motion_path(np.array([qa, qb]))
             return bool(check_path_until(problem, path, deadline, resolution, margin=None))
 
@@ -609,7 +609,7 @@ def _ompl_search(
     n = len(start)
     space = _space(ob, problem.lower, problem.upper)
     ss = og.SimpleSetup(space)
-    ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in builtins_range(n)]))
+    ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in range(n)]))
     si = ss.getSpaceInformation()
     resolution = check_factor * problem.resolution
     si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
@@ -633,13 +633,12 @@ def _ompl_search(
                 if not shortcut(solution, 10, 10):
                     break
     path = np.array(
-        [[solution.getState(i)[k] for k in builtins_range(n)] for i in builtins_range(solution.getStateCount())]
+        [[solution.getState(i)[k] for k in range(n)] for i in range(solution.getStateCount())]
     )
     path[0], path[-1] = start, goal
     return path
 
 
-builtins_range = range  # ``plan`` shadows ``range`` with OMPL's parameter name
 
 
 def straight_line(
@@ -722,8 +721,6 @@ class PlanarChecker:
             self._box = (np.full(3, -np.inf), np.full(3, np.inf))
         else:
             self._box = tuple(np.asarray(b, dtype=float) for b in problem.space_bounds)
-        self.fast = 0
-        self.exact = 0
 
     def full(self, qb: Array) -> Array:
         """The whole configuration at base pose ``qb``."""
@@ -747,9 +744,7 @@ class PlanarChecker:
             if not bool(np.all(space_free(near))):
                 return False
         if clearance >= self.margin + self.slack:
-            self.fast += 1
             return True
-        self.exact += 1
         return self.problem.is_valid(self.full(qb))
 
 
@@ -813,7 +808,7 @@ def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: boo
     the start's, the goal's; each valid at the start and at the goal base pose."""
     robot = problem.robot
     base = list(robot.base_dofs)
-    joints = [i for i in builtins_range(len(start)) if i not in base]
+    joints = [i for i in range(len(start)) if i not in base]
     options = [start[joints], goal[joints]]
     travel = getattr(robot, "travel_joints", None)
     if tuck and travel is not None and joints:
@@ -857,7 +852,7 @@ def _mobile_plan(
         return None
     th = base[2]
     goal[th] = start[th] + _wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
-    joints = [i for i in builtins_range(len(start)) if i not in base]
+    joints = [i for i in range(len(start)) if i not in base]
     lower, upper = problem.lower[base].copy(), problem.upper[base].copy()
     lower[2], upper[2] = start[th] - 2 * math.pi, start[th] + 2 * math.pi
     for values in _carried_joints(problem, start, goal, tuck):
@@ -961,9 +956,9 @@ def plan_kinodynamic(
 
         def propagate(s: Any, u: Any, duration: float, result: Any) -> None:
             q = np.array([s[0], s[1], s[2]])
-            control = np.array([u[i] for i in builtins_range(nc)])
+            control = np.array([u[i] for i in range(nc)])
             steps = max(1, int(round(duration / dt)))
-            for _ in builtins_range(steps):  # Euler at the executor's dt
+            for _ in range(steps):  # Euler at the executor's dt
                 q = robot.propagate_base(q, control, duration / steps)
             result[0], result[1], result[2] = float(q[0]), float(q[1]), float(q[2])
 
@@ -987,8 +982,8 @@ def plan_kinodynamic(
             return None
         solution = ss.getSolutionPath()
         controls = []
-        for i in builtins_range(solution.getControlCount()):
-            u = [solution.getControl(i)[k] for k in builtins_range(nc)]
+        for i in range(solution.getControlCount()):
+            u = [solution.getControl(i)[k] for k in range(nc)]
             controls.extend([u] * max(1, int(round(solution.getControlDuration(i) / dt))))
         base_controls = np.asarray(controls, dtype=float).reshape(-1, nc)
         rollout = [np.asarray(a, dtype=float)]  # the nominal rollout at dt (what the executor runs)

@@ -106,6 +106,8 @@ def rigid_step_hit(
     distance from the base axis), so samples whose bound stays below the nominal points'
     smallest clearance are safe; otherwise the points whose clearance is below the bound are
     moved and tested (:func:`point_clearance` < 0). Returns (sample index or -1, samples tested).
+    With a PVS the clearance is measured between voxel centres (minus half a diagonal), so a point
+    may lie up to another half diagonal nearer to an obstacle voxel: the safe bound subtracts it.
     """
     n = local.shape[0]
     wx, wy, clear = np.empty(n), np.empty(n), np.empty(n)
@@ -119,6 +121,8 @@ def rigid_step_hit(
             radius = r
         clear[p] = point_clearance(wx[p], wy[p], local[p, 2], lo, hi, margin, field, lattice, resolution,
                                    half_diagonal, grid_lo, grid_hi)
+        if field.shape[0] > 0:
+            clear[p] -= half_diagonal
         if clear[p] < least:
             least = clear[p]
     tested = 0

@@ -127,7 +127,10 @@ class ObstacleField:
                 np.asarray(self.pvs.max_corner, dtype=float))
 
     def clearance(self, points: Points3) -> Array:
-        """(n,) conservative distance from each point to the nearest obstacle (< 0: collision)."""
+        """(n,) clearance of each point (< 0: collision): to the boxes minus the margin; in the PVS the
+        distance between the point's voxel centre and the nearest obstacle voxel centre minus half a
+        voxel diagonal (< 0 exactly when the point's own voxel is an obstacle). A point can be up to
+        half a diagonal nearer than that: motion bounds must subtract it."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         out = box_distance(points, self.lo, self.hi) - self.box_margin
         if self.pvs is not None and len(points):
@@ -202,14 +205,10 @@ class ExpectedUtility:
     feasible: bool
     k: int
     collided_sample: int | None = None
-    collided_step: int | None = None
     utilities: Array = field(default_factory=lambda: np.zeros(0))  # g_i
     weights: Array = field(default_factory=lambda: np.zeros(0))  # eta P_i
     mean: float = 0.0  # plain sample mean of g_i (diagnostic)
     ess: float = 0.0  # effective sample size 1 / sum w_i^2 of the weights (k for equal weights)
-    finals: np.ndarray | None = None  # (k, dof)
-    point_checks: int = 0  # sampled states checked point by point (the rest by the bound)
-    seconds: float = 0.0
 
 
 def plan_controls(robot: Any, plan: MotionPlan | np.ndarray) -> tuple[Array, np.ndarray]:
@@ -262,10 +261,11 @@ def expected_utility(
     once per arm configuration). With joint noise every sampled state is tested on its own
     points (slow). ``obstacles`` defaults to the known environment of ``robot.sim``.
     """
-    t0 = time.perf_counter()
     k = int(k)
     if k < 1:
         raise ValueError("k must be >= 1")
+    if weighting not in ("probability", "mean"):
+        raise ValueError(f"weighting must be 'probability' or 'mean', got {weighting!r}")
     if obstacles is None:
         obstacles = ObstacleField.from_sim(robot.sim) if getattr(robot, "sim", None) is not None else \
             ObstacleField([], None)
@@ -284,7 +284,6 @@ def expected_utility(
     base = list(getattr(robot, "base_dofs", ()))
     joints = list(robot.joint_dofs)
     rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
-    checks = 0
     local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration
     for t in range(m, 0, -1):  # collisions are likeliest late (largest drift, goal near the object)
         if rigid:
@@ -303,10 +302,8 @@ def expected_utility(
                 if np.any(obstacles.clearance(robot.link_points(configs[i, t])) < 0.0):
                     hit = i
                     break
-        checks += n
         if hit is not None:
-            return ExpectedUtility(0.0, False, k, hit, t, finals=configs[:, -1], point_checks=checks,
-                                   seconds=time.perf_counter() - t0)
+            return ExpectedUtility(0.0, False, k, hit)
     finals = configs[:, -1]
     poses = np.array([robot.fk(q) for q in finals])
     samples = StateSamples(finals, poses, _weighted_lengths(robot, configs), log_prob)
@@ -315,13 +312,10 @@ def expected_utility(
     if weighting == "probability":
         weights = np.exp(log_prob - log_prob.max())
         weights /= weights.sum()  # eta P_i
-    elif weighting == "mean":
+    else:  # "mean": the plain sample mean
         weights = np.full(k, 1.0 / k)
-    else:
-        raise ValueError(f"weighting must be 'probability' or 'mean', got {weighting!r}")
     result = ExpectedUtility(float(np.sum(g * weights)), True, k, utilities=g, weights=weights,
-                             mean=float(g.mean()), ess=float(1.0 / np.sum(weights**2)), finals=finals,
-                             point_checks=checks, seconds=time.perf_counter() - t0)
+                             mean=float(g.mean()), ess=float(1.0 / np.sum(weights**2)))
     if hasattr(candidate, "expected"):
         candidate.expected = result
     return result
@@ -344,6 +338,12 @@ def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, ba
                                  obstacles.box_margin, field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution,
                                  grid_lo, grid_hi)
     return (None if hit < 0 else int(hit)), int(tested)
+
+
+def default_planner(robot: Any) -> str:
+    """``tuck_and_drive`` for a robot with a mobile base (no geometric planner finds its way
+    among furniture in the full 10-D space: benchmarks/planners.py), else ``rrt_connect``."""
+    return "tuck_and_drive" if getattr(robot, "base_dofs", ()) else "rrt_connect"
 
 
 # -- the view/state planning loop ------------------------------------------------------------
@@ -489,12 +489,13 @@ class NBVSSession:
             self.utility = self.visibility
         else:
             self.utility = registry.create("utility", utility, utility_params or {}, "<nbvs>")
-        if planner is None:
-            planner = "tuck_and_drive" if self.robot.base_dofs else "rrt_connect"
-        defaults: dict[str, Any] = {"time_limit": 3.0} if planner == "tuck_and_drive" else \
-            {"time_limit": 1.0, "try_direct": True} if planner != "kinodynamic" else {}
+        planner = planner or default_planner(self.robot)
+        declared = {p.name for p in registry.get("motion_planner", planner).params}
+        defaults = {"time_limit": 3.0 if planner == "tuck_and_drive" else 1.0, "try_direct": True}
+        params = {k: v for k, v in {**defaults, **(planner_params or {})}.items()
+                  if k in declared or k not in defaults}  # generic settings only where the planner has them
         self.planner_name = planner
-        self.planner = registry.create("motion_planner", planner, {**defaults, **(planner_params or {})}, "<nbvs>")
+        self.planner = registry.create("motion_planner", planner, params, "--planner", "planner")
         rng = np.random.default_rng(seed)
         self.rng_sample, self.rng_eu, self.rng_exec, self.rng_sensor = (
             np.random.default_rng(rng.integers(2**63)) for _ in range(4))
@@ -574,6 +575,8 @@ class NBVSSession:
                 continue
             if not robot.in_collision(q, "known") and np.all(self.obstacles.clearance(robot.link_points(q)) >= 0.0):
                 best, best_q = value, q
+        if best == -np.inf:
+            self.status, self.reason = "failed", f"no first view sees the region ({attempts} arm samples tried)"
         self.q = best_q
         robot.q = best_q.copy()
         robot.set_config(best_q)
@@ -582,7 +585,9 @@ class NBVSSession:
     def initial(self, attempts: int = 3000) -> ViewRecord:
         """First scan from the first state (:meth:`first_view`)."""
         record = ViewRecord(0, {}, 0.0, 0.0, None, 1.0, 0.0, 0, False, [])
-        self.scan(self.first_view(attempts), record)
+        pose = self.first_view(attempts)
+        if self.status == "running":
+            self.scan(pose, record)
         self.records.append(record)
         return record
 
@@ -722,7 +727,7 @@ class NBVSSession:
         EU score the state the controls reach).
         """
         robot, out = self.robot, []
-        for index, s in enumerate(states):
+        for s in states:
             goal = s.q.copy()
             if robot.base_dofs:
                 th = robot.base_dofs[2]
@@ -730,7 +735,7 @@ class NBVSSession:
                 if not robot.lower[th] <= goal[th] <= robot.upper[th]:
                     continue
             t0 = time.perf_counter()
-            plan = self.planner.plan(self.problem, self.q, goal, seed=self.plan_seed + index)
+            plan = self.planner.plan(self.problem, self.q, goal, seed=self.plan_seed + 2 * len(self.plan_log))
             self.plan_log.append((time.perf_counter() - t0, plan is not None))
             if plan is None:
                 continue
@@ -968,11 +973,3 @@ class NBVSSession:
             "planning_s_median": float(np.median([t for t, _ in self.plan_log])) if self.plan_log else None,
             "planner": self.planner_name,
         }
-
-
-def run_nbvs(sim: Any, registry: Any, utility: str = "area_factor", expected: bool = True, k: int = 100,
-             max_views: int = 12, seed: int = 0, **options: Any) -> dict[str, Any]:
-    """Run a whole NBVS reconstruction in ``sim`` (see :class:`NBVSSession`); returns its summary."""
-    session = NBVSSession(sim, registry, utility=utility, expected=expected, k=k, max_views=max_views, seed=seed,
-                          **options)
-    return session.run()

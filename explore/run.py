@@ -380,9 +380,15 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     overrides = _behaviour_overrides(config, tree_file, registry)
     spec = load_world_spec(config.world)
     robot = config.robot or spec.robot.plugin
+    planner = config.planner or DEFAULT_PLANNER
+    if "start_nbvs" in {node.behaviour for node in tree_file.root.walk()}:  # view/state planning picks by base
+        from .nbvs import default_planner
+
+        where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
+        planner = config.planner or default_planner(registry.get("robot", robot, *where).factory)
     chosen = {
         "strategy": config.strategy,
-        "motion_planner": config.planner or DEFAULT_PLANNER,
+        "motion_planner": planner,
         "robot": robot,
         "sensor": config.sensor or spec.sensor.plugin,
     }

@@ -161,7 +161,8 @@ class TreeNBVS:
             "selection_s_mean": float(np.mean(self.selection_s)) if self.selection_s else None,
             "selection_s_per_scan": self.selection_s,
             "stop_reason": s.reason or s.status,
-            "objects": [{"name": b.name, "result": "modelled", "coverage": coverage[-1] if coverage else None}
+            "objects": [{"name": b.name, "coverage": coverage[-1] if coverage else None,
+                         "result": "modelled" if s.status == "stopped" and coverage else "partial"}
                         for b in s.sim.objects()],
         }
 
@@ -183,7 +184,7 @@ class StartNBVS(ExploreBehaviour):
         Param("overlap", float, 0.5, "", "registration threshold h (Eq. 5)", low=0.0, high=1.0),
         Param("min_unknown", int, 30, "", "unknown voxels a candidate must see", low=0),
         Param("resolution", float, 0.01, "m", "PVS voxel edge length", low=1e-4),
-        Param("max_views", int, 12, "", "planned views after the first scan (overridden by --max-scans)", low=1),
+        Param("max_views", int, 12, "", "planned views after the first scan (--max-scans N: N - 1)", low=1),
         Param("noise", bool, True, "", "execute with the robot's positioning noise"),
         Param("stop_on_collision", bool, True, "", "a collision ends the run (the paper's runs do)"),
         Param("planner_time_limit", float, 3.0, "s", "time limit of each planning query", low=0.01),
@@ -207,9 +208,11 @@ class StartNBVS(ExploreBehaviour):
             ctx.sim, ctx.registry, utility=utility, expected=expected, k=k, seed=config.seed,
             n_samples=self.p["n_samples"], top=self.p["top"], overlap=self.p["overlap"],
             min_unknown=self.p["min_unknown"], resolution=float(config.setting("resolution", self.p["resolution"])),
-            max_views=config.max_scans or self.p["max_views"], noise=self.p["noise"],
+            max_views=max(0, config.max_scans - 1) if config.max_scans else self.p["max_views"],
+            noise=self.p["noise"],
             stop_on_collision=self.p["stop_on_collision"], beam_stride=self.p["beam_stride"],
-            planner=config.planner, planner_params={"time_limit": self.p["planner_time_limit"]},
+            planner=config.planner,
+            planner_params={"time_limit": self.p["planner_time_limit"], **config.scoped("planner")},
             utility_params={} if expected or utility == "area_factor" else params,
             weighting=self.p["weighting"],
         )
@@ -232,7 +235,10 @@ class NBVSFirstState(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        pose = _session(self).first_view()
+        nbvs = _session(self)
+        pose = nbvs.first_view()
+        if nbvs.session.status == "failed":
+            return failure(nbvs.session.reason)
         self.write("pose", pose)
         return success(f"sensor at {np.round(pose[:3, 3], 3).tolist()}")
 

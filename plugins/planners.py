@@ -41,7 +41,7 @@ CONTROL_CHOICES = _control_choices()
 _GEOMETRIC = (
     Param("time_limit", float, 1.0, "s", "planning time limit", low=0.001),
     Param("range", float, 0.0, "rad", "maximum step of tree extension (0 = OMPL default)", low=0.0),
-    Param("simplify", bool, True, "", "shortcut the path between its vertices (PathSimplifier.reduceVertices)"),
+    Param("simplify", bool, True, "", "shortcut the path (OMPL reduceVertices, collapseCloseVertices)"),
     Param("try_direct", bool, True, "", "return the straight segment when it is valid, without OMPL"),
     Param("check_factor", float, 3.0, "", "search checks motions every factor x resolution (result re-checked "
           "at the resolution)", low=1.0),

@@ -356,11 +356,10 @@ class _BulletRobot(Robot):
                 out.append(b)
                 continue
             heading = math.atan2(d[1], d[0])
-            options = (heading, heading + math.pi)
-            cost = [abs(_wrap(h - a[th])) + abs(_wrap(b[th] - h)) for h in options]
-            best = options[int(np.argmin(cost))]
             mid = 0.5 * (a[th] + b[th])
-            h = mid + _wrap(best - mid)
+            # drive forwards or backwards, at the driving heading's unwrapped value nearest the turns' middle
+            options = [mid + _wrap(o - mid) for o in (heading, heading + math.pi)]
+            h = min(options, key=lambda o: abs(o - a[th]) + abs(b[th] - o))
             pieces = np.array([abs(h - a[th]) / self.base_turn_speed, drive / self.base_speed,
                                abs(b[th] - h) / self.base_turn_speed])
             s1, s2 = np.cumsum(pieces)[:2] / max(float(pieces.sum()), 1e-12)
