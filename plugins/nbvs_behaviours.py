@@ -33,6 +33,11 @@ class TreeNBVS:
         self._pending: Any = None  # the record of the move whose scan is not integrated yet
         self._states: list[Any] = []
 
+    @property
+    def end_reason(self) -> str:
+        """Why the run ended (the run's reason when the tree succeeds)."""
+        return str(self.session.reason)
+
     # -- steps -------------------------------------------------------------------------------
     def _timed(self, stage: str, fn: Any, *args: Any) -> Any:
         t0 = time.perf_counter()
@@ -343,7 +348,7 @@ class NBVSExecute(ExploreBehaviour):
 
     name = "nbvs_execute"
     reads = ("nbvs", "candidate")
-    writes = ("pose", "done", "reason")
+    writes = ("pose",)
     blocking = True
 
     def work(self) -> Outcome:
@@ -351,9 +356,7 @@ class NBVSExecute(ExploreBehaviour):
         run = session.execute(self.read("candidate"))
         self.context.trace("motion", steps=len(run.controls), collided=run.collided,
                            bodies=[list(e.bodies) for e in run.collisions])
-        if run.collided and session.session.status == "collided":
-            self.write("done", True)
-            self.write("reason", session.session.reason)
+        if run.collided and session.session.status == "collided":  # the mission fails, as the paper counts it
             return failure(session.session.reason)
         self.write("pose", run.sensor_pose)
         return success(f"{len(run.controls)} control steps" + (" (collided, continuing)" if run.collided else ""))
