@@ -21,7 +21,7 @@ surface model, candidates, utility, termination) never touches the ground truth;
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -92,12 +92,16 @@ class ModellingSession:
     fallback_generator : view generator used only when the strategy's generator leaves the
         stack empty (so that a benchmark run can go on to ``max_scans``); None disables it.
         Its candidates are recorded with their own source name.
+    region : (min corner, max corner) of the box to model instead of the world's region (scene
+        exploration models one cluster's box)
+    obstacles : extra (lo, hi) boxes the planning treats as known environment (the rest of the scene)
     """
 
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
                  max_scans: int = 30, planner: Any = None, continue_after_stop: bool = False,
                  pvs_params: dict | None = None, surface_params: dict | None = None,
-                 fallback_generator: str | None = "sphere") -> None:
+                 fallback_generator: str | None = "sphere", region: tuple[Array, Array] | None = None,
+                 obstacles: Sequence[tuple[Array, Array]] = ()) -> None:
         from .pvs import PVS
         from .surface import SurfaceModel
 
@@ -114,8 +118,9 @@ class ModellingSession:
         self.continue_after_stop = continue_after_stop
         self.sensor = sim.sensor
         self.robot = sim.robot
-        region_min = np.asarray(sim.spec.region_min, dtype=float)
-        region_max = np.asarray(sim.spec.region_max, dtype=float)
+        region_min = np.asarray(sim.spec.region_min if region is None else region[0], dtype=float)
+        region_max = np.asarray(sim.spec.region_max if region is None else region[1], dtype=float)
+        self.obstacles = [(np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)) for lo, hi in obstacles]
         self.pvs = PVS.for_region(region_min, region_max, resolution, **(pvs_params or {}))
         self.surface = SurfaceModel(region_min, region_max, **(surface_params or {}))
         self.stack = CandidateStack()
@@ -144,7 +149,7 @@ class ModellingSession:
     # -- setup helpers -------------------------------------------------------------------
     def _environment_boxes(self) -> list[tuple[Array, Array]]:
         """Boxes of the known static environment (the planner may know it)."""
-        return [tuple(b.mesh.bounds) for b in self.sim.bodies if not b.is_object]
+        return [tuple(b.mesh.bounds) for b in self.sim.bodies if not b.is_object] + list(self.obstacles)
 
     def _snapshot(self) -> VoxelGrid:
         """Dense copy of the PVS with the surface features for the utilities."""

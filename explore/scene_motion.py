@@ -1,0 +1,198 @@
+"""Moving the robot to a view for scene exploration: IK, planning, noisy execution, odometry.
+
+The scene session asks for a sensor target (a pose or, for line sensors, a scan path);
+:class:`Mover` finds a configuration (the robot plugin's IK, for scan paths the 10 mm
+portion IK of :func:`explore.motion.linear_scan_path_ik`), plans a collision-free motion with
+a motion-planner plugin (known environment plus the scene PVS: nothing may enter space the
+PVS has seen occupied), and executes it with the robot's positioning noise
+(``Robot.execute``, Vasquez-Gomez Sec. A6). The free flyer is the thesis' sensor without a
+robot: it moves in a straight line without noise.
+
+The robot's *belief* about where its sensor is comes from odometry: the base advances by
+the nominal (noise-free) motion of the executed controls, the arm joints are measured
+exactly. With a noisy base the believed pose drifts from the true one; scans are recorded at
+the believed pose and the gtsam pose graph (:mod:`explore.registration`) corrects them. The
+true pose is kept for the metrics only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .geometry import invert
+from .scan import ScanPath
+from .typed import Array, Pose
+
+Target = Pose | ScanPath
+
+
+@dataclass
+class Move:
+    """The outcome of one motion to a view.
+
+    ``target`` is where the sensor really is (what the simulated sensor uses), ``believed``
+    where the robot thinks its sensor is at the start of the target (odometry/kinematics);
+    both are world_T_sensor (OpenCV frame).
+    """
+
+    target: Target
+    believed: Pose
+    travel_m: float
+    planning_s: float
+    collisions: int
+    planner: str
+
+
+def target_start(target: Target) -> Pose:
+    return target.start if isinstance(target, ScanPath) else np.asarray(target, dtype=float)
+
+
+def _planar(x: float, y: float, theta: float) -> Pose:
+    out = np.eye(4)
+    c, s = math.cos(theta), math.sin(theta)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:2, 3] = (x, y)
+    return out
+
+
+def _planar_params(pose: Pose) -> tuple[float, float, float]:
+    return float(pose[0, 3]), float(pose[1, 3]), math.atan2(pose[1, 0], pose[0, 0])
+
+
+class Mover:
+    """Moves a simulation's robot to sensor targets and tracks its believed sensor pose.
+
+    Parameters
+    ----------
+    sim : Simulation with robot and sensor attached
+    registry : plugin registry (for the motion planner)
+    planner : motion-planner plugin name (default ``rrt_connect``; the free flyer moves in a
+        straight line)
+    noise : execute with the robot's positioning noise
+    occupied_from : PVS probability from which a robot point counts as colliding
+    seed : seeds IK restarts and the execution noise
+    """
+
+    def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
+                 occupied_from: float = 0.75, seed: int = 0, planning_time: float = 2.0) -> None:
+        self.sim = sim
+        self.robot = sim.robot
+        self.noise = bool(noise)
+        self.occupied_from = float(occupied_from)
+        self.rng = np.random.default_rng(seed)
+        self.pvs: Any = None
+        self.free_flyer = self.robot is None or self.robot.name == "free_flyer"
+        self.planner = None
+        if not self.free_flyer:
+            self.planner = registry.create("motion_planner", planner or "rrt_connect",
+                                           {"time_limit": planning_time}, "<scene>")
+        self.base_dofs: tuple[int, ...] = tuple(getattr(self.robot, "base_dofs", ()) or ())
+        self.believed_q: Array | None = None if self.robot is None else np.asarray(self.robot.q, dtype=float).copy()
+        self.travel_m = 0.0
+        self.collisions = 0
+        self.failed_moves = 0
+        self._pose: Pose | None = None  # free flyer: current sensor pose
+
+    # -- queries ---------------------------------------------------------------------------
+    @property
+    def true_pose(self) -> Pose | None:
+        """The sensor's true world pose (metrics only)."""
+        if self.free_flyer:
+            return self._pose
+        return self.robot.fk(self.robot.q)
+
+    def believed_pose(self) -> Pose | None:
+        """The sensor pose the robot believes it has."""
+        if self.free_flyer:
+            return self._pose
+        pose = self.robot.fk(self.believed_q)
+        self.robot.set_config(self.robot.q)  # fk may move the bodies
+        return pose
+
+    def reach(self, target: Target) -> Array | list | None:
+        """Configuration(s) that realise ``target``: one for a view, the sweep for a scan path; None if unreachable."""
+        if self.free_flyer:
+            return []
+        robot = self.robot
+        if isinstance(target, ScanPath):
+            from .motion import linear_scan_path_ik
+
+            ik = linear_scan_path_ik(robot, target, rng=self.rng)
+            return list(ik.configs) if ik.complete else None
+        return robot.ik(np.asarray(target, dtype=float), self.rng)
+
+    # -- motion ----------------------------------------------------------------------------
+    def _problem(self) -> Any:
+        from .motion import MotionProblem
+
+        pvs, limit = self.pvs, self.occupied_from
+        space_free = None if pvs is None else (lambda points: pvs.probability(points) < limit)
+        return MotionProblem(self.robot, space_free=space_free)
+
+    def move(self, target: Target, configs: Array | list | None = None) -> Move | None:
+        """Go to ``target`` (IK unless ``configs`` from :meth:`reach` is given); None if impossible."""
+        if self.free_flyer:
+            return self._fly(target)
+        if configs is None:
+            configs = self.reach(target)
+        if configs is None:
+            self.failed_moves += 1
+            return None
+        sweep = np.atleast_2d(np.asarray(configs, dtype=float))
+        robot = self.robot
+        start = np.asarray(robot.q, dtype=float).copy()
+        t0 = time.perf_counter()
+        plan = self.planner.plan(self._problem(), start, sweep[0], seed=int(self.rng.integers(2**31)))
+        planning_s = time.perf_counter() - t0
+        if plan is None:
+            self.failed_moves += 1
+            return None
+        start_pose = robot.fk(start)
+        execution = robot.execute(plan, self.rng, noise=self.noise, world="true")
+        collisions = len(execution.collisions)
+        self._odometry(start, execution)
+        true_start = robot.fk(robot.q)
+        believed = self.believed_pose()
+        true_target: Target = true_start
+        if isinstance(target, ScanPath) and len(sweep) > 1:
+            path = np.vstack([robot.q, sweep[1:] - sweep[0] + robot.q])
+            sweep_exec = robot.execute(path, self.rng, noise=self.noise, world="true")
+            collisions += len(sweep_exec.collisions)
+            self._odometry(path[0], sweep_exec)
+            true_end = robot.fk(robot.q)
+            end = true_start.copy()
+            end[:3, 3] = true_end[:3, 3]
+            true_target = ScanPath(true_start, end, target.speed)
+        travel = float(np.linalg.norm(true_start[:3, 3] - start_pose[:3, 3]))
+        self.travel_m += travel
+        self.collisions += collisions
+        return Move(true_target, believed, travel, planning_s, collisions, getattr(plan, "planner", ""))
+
+    def _fly(self, target: Target) -> Move:
+        start = target_start(target)
+        travel = 0.0 if self._pose is None else float(np.linalg.norm(start[:3, 3] - self._pose[:3, 3]))
+        end = target.end if isinstance(target, ScanPath) else start
+        self._pose = np.asarray(end, dtype=float).copy()
+        if self.robot is not None:
+            q = self.robot.ik(self._pose)
+            if q is not None:
+                self.robot.q = q
+        self.travel_m += travel
+        return Move(target, start.copy(), travel, 0.0, 0, "straight_line")
+
+    def _odometry(self, start: Array, execution: Any) -> None:
+        """Advance the believed configuration by the nominal motion of the executed controls."""
+        final = np.asarray(execution.final, dtype=float)
+        believed = final.copy()
+        if self.base_dofs and self.believed_q is not None:
+            nominal, _, _ = self.robot.rollout(start, execution.controls, None, noise=False)
+            ix, iy, ith = self.base_dofs
+            step = invert(_planar(start[ix], start[iy], start[ith])) @ _planar(*nominal[-1][[ix, iy, ith]])
+            moved = _planar(*self.believed_q[[ix, iy, ith]]) @ step
+            believed[[ix, iy, ith]] = _planar_params(moved)
+        self.believed_q = believed
