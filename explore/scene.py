@@ -521,13 +521,31 @@ class SceneSession:
                 break
         return None
 
+    def collect_view_hypotheses(self, obj: SceneObject) -> int:
+        """Per-view hypotheses (for the object's model and its rivals) of every view not yet used."""
+        names = [obj.model, *[r.model for r in obj.rivals]]
+        used = {view for view, _ in obj.view_hypotheses}
+        for view in obj.cluster.view_ids:
+            if view not in used:
+                found = self.view_hypothesis(obj, view, names)
+                if found is not None:
+                    obj.view_hypotheses.append((view, found))
+        return len(obj.view_hypotheses)
+
+    def settle_from_views(self, obj: SceneObject) -> str:
+        """Resolve an ambiguous object with the views already taken (no new ones): fuse and decide."""
+        if obj.status != AMBIGUOUS:
+            return obj.status
+        self.collect_view_hypotheses(obj)
+        self.fuse(obj)
+        self.validate(obj)
+        self._settle_ambiguous(obj)
+        return obj.status
+
     def multi_view_step(self, obj: SceneObject) -> bool:
         """One more view of an ambiguous object; True when it is resolved or out of views."""
         if not obj.view_hypotheses:  # per-view hypotheses of the views taken so far
-            for view in obj.cluster.view_ids:
-                found = self.view_hypothesis(obj, view, [obj.model, *[r.model for r in obj.rivals]])
-                if found is not None:
-                    obj.view_hypotheses.append((view, found))
+            self.collect_view_hypotheses(obj)
         view = self.next_view(obj, f"multi-view {obj.id}") if obj.multi_views < self.multi_view_views else None
         if view is None:
             obj.note("no further view for multi-view recognition")
@@ -577,12 +595,7 @@ class SceneSession:
         """A ModellingSession over the object's box (the other objects are obstacles)."""
         from .modelling import ModellingSession, resolve_strategy
 
-        lo, hi = obj.box(self.box_margin, self.box_top)
-        lo = np.maximum(lo, self.pvs.min_corner)
-        hi = np.minimum(hi, self.pvs.max_corner)
-        lo[2] = obj.cluster.points[:, 2].min() - 0.004
-        if self.table is not None:  # the box rests on the support plane
-            lo[2] = max(lo[2] - 0.02, float(self.table.world_T_table[2, 3]) + 0.002)
+        lo, hi = self._model_box(obj)
         others = [o.box(0.005) for o in self.objects if o.id != obj.id and len(o.cluster.points) >= self.min_points]
         seen = len(obj.cluster.view_ids)  # scene views integrated first count towards the session's scans
         strategy = resolve_strategy(self.strategy, self.registry)
@@ -598,6 +611,16 @@ class SceneSession:
             self._integrate_model_scan(session, self.views[index], "scene")
         session.ctx.sensor_pose = self.mover.believed_pose()
         return session
+
+    def _model_box(self, obj: SceneObject) -> tuple[Array, Array]:
+        """The object's box grown by the margins, clipped to the region, resting on the table."""
+        lo, hi = obj.box(self.box_margin, self.box_top)
+        lo = np.maximum(lo, self.pvs.min_corner)
+        hi = np.minimum(hi, self.pvs.max_corner)
+        lo[2] = obj.cluster.points[:, 2].min() - 0.004
+        if self.table is not None:  # the box rests on the support plane
+            lo[2] = max(lo[2] - 0.02, float(self.table.world_T_table[2, 3]) + 0.002)
+        return lo, hi
 
     def _integrate_model_scan(self, session: Any, view: View, source: str, candidate: Any = None) -> None:
         from .modelling import ScanRecord
@@ -675,6 +698,31 @@ class SceneSession:
             obj.note("modelling gave no mesh")
             return None
         name = self.add_to_database(obj, close_holes(mesh), session.n_scans)
+        obj.status, obj.model = MODELLED, name
+        return name
+
+    def learn_from_views(self, obj: SceneObject) -> str | None:
+        """Model an unknown object from the views already taken (Görner's multi-view object
+        representation, here fused into a mesh); add it to the database; its name."""
+        from scipy.spatial import cKDTree
+
+        from .surface import SurfaceModel
+
+        lo, hi = self._model_box(obj)
+        points = obj.sample(0.001)
+        spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1])) if len(points) > 2 else 0.002
+        f = float(np.clip(spacing / 0.002, 1.0, 5.0))  # sparse room-scale views need a coarser surface
+        surface = SurfaceModel(lo, hi, point_spacing=0.002 * f, normal_radius=0.006 * f, mesh_radius=0.008 * f,
+                               voxel_size=0.0035 * f)
+        for index in obj.cluster.view_ids:
+            surface.integrate(self.views[index].scan)
+        mesh = surface.mesh
+        obj.surface_points = np.asarray(surface.points).copy()
+        obj.coverage_estimate = float(surface.coverage_area()) if len(mesh.triangles) else 0.0
+        if len(mesh.triangles) < 20:
+            obj.note("too few points for a mesh")
+            return None
+        name = self.add_to_database(obj, close_holes(mesh), len(obj.cluster.view_ids))
         obj.status, obj.model = MODELLED, name
         return name
 
