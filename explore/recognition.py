@@ -46,6 +46,9 @@ ScanSource = Scan | Sequence[Scan] | Mapping[int, Scan]
 #: q_h acceptance threshold (Kriegel Eq. 3.10; value [UNSPEC] in the thesis, chosen from the
 #: measured gap between right (>= 0.84) and wrong (<= 0.25) matches on the tabletop)
 Q_H_MIN = 0.5
+#: N_m/N_r from which the model's rendering counts as confirmed although the cluster holds more
+#: (another object touching it): right matches 0.92-0.98, wrong ones <= 0.71 on the tabletop
+RENDER_FIT_MIN = 0.9
 
 
 @dataclass
@@ -81,14 +84,33 @@ class Hypothesis:
         """The render-and-compare score (Eq. 3.10), NaN if it was not computed (no scans)."""
         return float(self.diagnostics.get("q_h", math.nan))
 
+    @property
+    def render_fit(self) -> float:
+        """N_m / N_r: the share of the model's rendered pixels the data confirms (NaN without scans)."""
+        rendered = self.diagnostics.get("N_r")
+        return float(self.diagnostics["N_m"]) / rendered if rendered else math.nan
 
-def accepted(hypotheses: Sequence[Hypothesis], min_q_h: float = Q_H_MIN) -> list[Hypothesis]:
+
+def accepted(
+    hypotheses: Sequence[Hypothesis], min_q_h: float = Q_H_MIN, min_render_fit: float = RENDER_FIT_MIN,
+    min_matched: int = 100,
+) -> list[Hypothesis]:
     """The hypotheses whose q_h reaches ``min_q_h`` (Kriegel Eq. 3.10), in their order.
 
-    A hypothesis without q_h (recognised without scans to render into) is never accepted:
-    the threshold is what separates a match from a guess.
+    Extension for touching objects (Görner's assumption 3 broken): a hypothesis whose rendering
+    the data confirms (N_m/N_r >= ``min_render_fit``, at least ``min_matched`` pixels) is
+    accepted as a *partial* match even with a low q_h -- the model is there, the rest of the
+    cluster is something else (the scene session splits it off). A hypothesis without q_h
+    (recognised without scans to render into) is never accepted.
     """
-    return [h for h in hypotheses if math.isfinite(h.q_h) and h.q_h >= min_q_h]
+    out = []
+    for h in hypotheses:
+        if not math.isfinite(h.q_h):
+            continue
+        partial = h.render_fit >= min_render_fit and h.diagnostics.get("N_m", 0) >= min_matched
+        if h.q_h >= min_q_h or partial:
+            out.append(h)
+    return out
 
 
 def rivals(

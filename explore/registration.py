@@ -9,7 +9,7 @@
   odometry / kinematics factors (noisy), ``BetweenFactorPose3`` from pairwise ICP (consecutive
   views and loop closures with enough overlap), Huber or Cauchy kernels, Levenberg-Marquardt.
   :func:`rebase_scan` re-expresses a scan at its corrected pose so the PVS and the surface can
-  be re-integrated.
+  be re-integrated. :class:`IncrementalPoseGraph` grows the graph one scan at a time.
 * :func:`fuse_poses` -- multi-view fusion of recognition hypotheses (thesis Sec. 5.6.2):
   nearest-neighbour pose clustering with a distance and an angle cut-off, then the weighted
   chordal L2 mean of the largest cluster (rotation by SVD projection, Hartley et al. 2013).
@@ -651,6 +651,86 @@ def pose_graph_from_scans(
         poses_out = graph.optimize(max_iterations)
     before, after = graph.error
     return PoseGraphResult(poses_out, believed, list(graph.edges), float(before), float(after))
+
+
+class IncrementalPoseGraph:
+    """The pose graph of :func:`pose_graph_from_scans`, grown one scan at a time.
+
+    Each new scan gets an odometry factor to its predecessor (or an absolute kinematic prior
+    with ``prior_sigmas``), an ICP factor to its predecessor seeded by the corrected
+    predecessor plus the odometry step, and ICP loop closures to at most ``max_links``
+    earlier scans whose predicted overlap is at least ``min_overlap``. Levenberg-Marquardt
+    then re-optimises the whole graph (fast: the ICP edges are computed once). Used by the
+    scene exploration after every view of a noisy mobile base.
+    """
+
+    def __init__(
+        self,
+        odometry_sigmas: Any = sigmas6(math.radians(2.0), 0.02),
+        prior_sigmas: Any | None = None,
+        voxel: float = 0.01,
+        edge_sigma: float = 0.005,
+        min_overlap: float = 0.3,
+        max_links: int = 3,
+        robust: str = "huber",
+        robust_k: float = 1.345,
+        max_iterations: int = 100,
+    ) -> None:
+        self.graph = PoseGraph(robust=robust, robust_k=robust_k)
+        self.odometry_sigmas = odometry_sigmas
+        self.prior_sigmas = prior_sigmas
+        self.voxel = float(voxel)
+        self.scale = 1.0 / float(edge_sigma) ** 2
+        self.min_overlap = float(min_overlap)
+        self.max_links = int(max_links)
+        self.max_iterations = int(max_iterations)
+        self.scales = (4.0, 2.0, 1.0)
+        self.believed: list[Pose] = []
+        self.pyramids: list[list] = []
+        self.poses = np.zeros((0, 4, 4))
+
+    def __len__(self) -> int:
+        return len(self.believed)
+
+    def add(self, scan: Scan | Points3, believed: Pose | None = None) -> np.ndarray:
+        """Add a scan (world points at ``believed``, default its own pose); all corrected poses."""
+        if believed is None:
+            if not isinstance(scan, Scan):
+                raise ValueError("a believed pose is required for a point array")
+            believed = scan.sensor_poses[0]
+        believed = _as_pose(believed)
+        points = transform_points(invert(believed), scan.points()) if isinstance(scan, Scan) else _as_points(
+            scan, "scan points")
+        i = len(self.believed)
+        anchor = sigmas6(1e-6, 1e-6) if i == 0 else None
+        self.graph.add_node(believed, self.prior_sigmas if self.prior_sigmas is not None else anchor)
+        if i > 0 and self.prior_sigmas is None:
+            self.graph.add_odometry(i - 1, i, invert(self.believed[-1]) @ believed, self.odometry_sigmas)
+        self.believed.append(believed)
+        self.pyramids.append(_pyramid(points, self.voxel, self.scales))
+        if i == 0:
+            self.poses = believed[None].copy()
+            return self.poses
+        predicted = np.concatenate([self.poses, (self.poses[-1] @ invert(self.believed[-2]) @ believed)[None]])
+        self._link(i - 1, i, predicted, "icp")
+        down_i = np.asarray(self.pyramids[i][1].points)
+        candidates = []
+        for j in range(i - 1):
+            rel = invert(predicted[j]) @ predicted[i]
+            share = overlap(down_i, np.asarray(self.pyramids[j][1].points), rel, 4.0 * self.voxel)
+            if share >= self.min_overlap:
+                candidates.append((share, j))
+        for _, j in sorted(candidates, reverse=True)[: self.max_links]:
+            self._link(j, i, predicted, "loop")
+        self.poses = self.graph.optimize(self.max_iterations)
+        return self.poses
+
+    def _link(self, target: int, source: int, estimate: np.ndarray, kind: str) -> None:
+        init = invert(estimate[target]) @ estimate[source]
+        result = register_pair(self.pyramids[source], self.pyramids[target], init, self.voxel, self.scales)
+        if result.fitness >= self.min_overlap and result.information is not None:
+            self.graph.add_registration(target, source, result.transformation, result.information * self.scale,
+                                        kind=kind, fitness=result.fitness)
 
 
 # -- multi-view pose fusion (Kriegel Sec. 5.6.2) -----------------------------------------------

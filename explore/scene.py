@@ -172,7 +172,12 @@ class SceneSession:
     associate_tolerance : a new view's cluster joins an object when its points come this close
     box_margin : the modelling box around an object's points (and ``box_top`` above them)
     min_points : clusters with fewer points (over all views) are noise, not objects
-    register : run the pose graph after every view when the robot has a noisy base
+    reach_tries : NBS candidates tried for reachability (IK) per modelling step before the most
+        novel reachable view of the object is taken instead
+    split_distance, split_share : points of a recognised object farther than ``split_distance``
+        from the model, if at least ``split_share`` of them, are another object touching it
+    register : grow a pose graph with every view when the robot has a noisy base (and correct
+        the views, the clusters and the PVS with it)
     progress : called with a line of text after every step (long work shows progress)
     """
 
@@ -203,6 +208,9 @@ class SceneSession:
         box_margin: float = 0.03,
         box_top: float = 0.04,
         min_points: int = 60,
+        reach_tries: int = 4,
+        split_distance: float = 0.015,
+        split_share: float = 0.1,
         register: bool = True,
         progress: Callable[[str], None] | None = None,
     ) -> None:
@@ -229,6 +237,9 @@ class SceneSession:
         self.box_margin = float(box_margin)
         self.box_top = float(box_top)
         self.min_points = int(min_points)
+        self.split_distance = float(split_distance)
+        self.reach_tries = int(reach_tries)
+        self.split_share = float(split_share)
         self.progress = progress
         lo = np.asarray(sim.spec.region_min, dtype=float)
         hi = np.asarray(sim.spec.region_max, dtype=float)
@@ -240,7 +251,9 @@ class SceneSession:
         self.rng_sensor = np.random.default_rng(rng.integers(2**63))
         self.mover = Mover(sim, registry, planner, noise, seed=int(rng.integers(2**31)))
         self.mover.pvs = self.pvs
-        self.register_views = bool(register) and bool(self.mover.base_dofs) and noise
+        self.graph = None  # incremental pose graph, for a robot whose base odometry drifts
+        if register and self.mover.base_dofs and noise and hasattr(self.registrar, "incremental"):
+            self.graph = self.registrar.incremental()
         self.views: list[View] = []
         self.objects: list[SceneObject] = []
         self.table: Table | None = None
@@ -250,7 +263,7 @@ class SceneSession:
         self._modelling: dict[int, Any] = {}
         self.added: list[str] = []
         self.known_at_start = list(database.names())
-        self.pose_graph: Any = None
+        self.registered = False
         self.started = time.perf_counter()
         self.timings: dict[str, float] = {}
 
@@ -287,7 +300,7 @@ class SceneSession:
 
     # -- views -------------------------------------------------------------------------------
     def add_view(self, target: Target, purpose: str, object_id: int | None = None,
-                 configs: Any = None) -> View | None:
+                 configs: list | None = None) -> View | None:
         """Move there, scan, record the scan at the believed pose, integrate it into the PVS.
 
         None if the view budget is spent or the robot cannot reach the target.
@@ -306,11 +319,14 @@ class SceneSession:
             scan = rebase_scan(scan, move.believed)
         view = View(len(self.views), scan, move.believed.copy(), true_pose.copy(), purpose, object_id)
         self.views.append(view)
-        self.pvs.integrate(scan)
         self._pending.append(view.index)
         self._timed("scan_s", start)
-        if self.register_views and len(self.views) >= 2:
-            self.correct_poses()
+        if self.graph is not None:
+            start = time.perf_counter()
+            self._apply(self.graph.add(scan, view.believed))
+            self._timed("registration_s", start)
+        else:
+            self.pvs.integrate(scan)
         self._say(f"view {view.index + 1}: {purpose} ({int(scan.hits.sum())} returns)")
         return view
 
@@ -435,8 +451,9 @@ class SceneSession:
         start = time.perf_counter()
         obj.rejected = []
         survivors = []
+        passed = {id(h) for h in self.recognizer.accept(obj.hypotheses)}
         for h in sorted(obj.hypotheses, key=lambda h: -(h.q_h if math.isfinite(h.q_h) else -1.0)):
-            if not (math.isfinite(h.q_h) and h.q_h >= self.recognizer.min_q_h):
+            if id(h) not in passed:
                 obj.rejected.append({"model": h.model, "q_h": h.q_h, "by": "q_h"})
                 continue
             checked = self._validate_one(h)
@@ -459,7 +476,37 @@ class SceneSession:
             obj.status = RECOGNISED
             if obj.recognised_after_views is None:
                 obj.recognised_after_views = len(self.views)
+            if self._split_residual(obj) is not None:  # the rest was another object: recognise what is left
+                self.recognise(obj)
+                return self.validate(obj)
         return obj.status
+
+    def _split_residual(self, obj: SceneObject) -> SceneObject | None:
+        """Points the recognised model does not explain (an object touching it) become a new object.
+
+        A share of at least ``split_share`` of the cluster (and ``min_points`` points) farther
+        than ``split_distance`` from the model surface at the pose is split off.
+        """
+        import open3d as o3d
+
+        mesh = next(m.mesh for m in self.models if m.name == obj.model)
+        scene = o3d.t.geometry.RaycastingScene()
+        tmesh = o3d.t.geometry.TriangleMesh()
+        tmesh.vertex.positions = o3d.core.Tensor(mesh.vertices.astype(np.float32))
+        tmesh.triangle.indices = o3d.core.Tensor(mesh.triangles.astype(np.int32))
+        scene.add_triangles(tmesh)
+        local = transform_points(invert(obj.pose), obj.cluster.points).astype(np.float32)
+        far = scene.compute_distance(o3d.core.Tensor(local)).numpy() > self.split_distance
+        if far.sum() < self.min_points or far.mean() < self.split_share:
+            return None
+        new_id = max(o.id for o in self.objects) + 1
+        rest = SceneObject(new_id, dataclasses.replace(obj.cluster.subset(far), id=new_id))
+        obj.cluster = obj.cluster.subset(~far)
+        obj._sample = None
+        obj.note(f"{int(far.sum())} points not explained by {obj.model}: split off as object {new_id}")
+        rest.note(f"split off object {obj.id}")
+        self.objects.append(rest)
+        return rest
 
     def recognise_all(self) -> dict[int, str]:
         """Recognise and validate every object that is not explained or being modelled."""
@@ -512,12 +559,13 @@ class SceneSession:
         seen = np.array([self.views[v].believed[:3, 3] for v in obj.cluster.view_ids])
         tried = 0
         for index in order_by_novelty(poses, seen, centre):
-            target = as_target(self.sim.sensor, poses[index], obj.cluster.points, distance)
-            configs = self.mover.reach(target)
+            if not self.mover.plausible(poses[index][:3, 3], centre):
+                continue
+            reached = self.mover.reach(as_target(self.sim.sensor, poses[index], obj.cluster.points, distance))
             tried += 1
-            if configs is not None:
-                return self.add_view(target, purpose, obj.id, configs)
-            if tried >= 6:
+            if reached is not None:
+                return self.add_view(reached[0], purpose, obj.id, reached[1])
+            if tried >= 2 * self.reach_tries:
                 break
         return None
 
@@ -651,13 +699,18 @@ class SceneSession:
                 return True
         session.generate()
         target, configs, candidate = None, None, None
-        for _ in range(6):
+        centre = obj.cluster.centroid
+        tries = 0
+        while tries < self.reach_tries:
             candidate = session.select()
             if candidate is None:
                 break
-            configs = self.mover.reach(candidate.target)
-            if configs is not None:
-                target = candidate.target
+            if not self.mover.plausible(target_start(candidate.target)[:3, 3], centre):
+                continue
+            tries += 1
+            reached = self.mover.reach(candidate.target)
+            if reached is not None:
+                target, configs = reached
                 break
         view = None
         if target is not None:
@@ -779,10 +832,28 @@ class SceneSession:
         believed = [v.believed for v in self.views]
         result = self.registrar.register([rebase_scan(v.scan, v.believed) if v.corrected is not None else v.scan
                                           for v in self.views], believed)
-        self.pose_graph = result
         self.reintegrate(list(result.poses))
         self._timed("registration_s", start)
         return result
+
+    def _apply(self, poses: np.ndarray, tolerance: tuple[float, float] = (0.002, math.radians(0.2))) -> None:
+        """Take the incremental graph's poses: the new view is integrated at its corrected pose;
+        if an earlier view moved by more than ``tolerance`` (m, rad) everything is re-integrated."""
+        from .registration import pose_error as se3_error
+
+        moved = any(
+            max(err[0] / tolerance[0], err[1] / tolerance[1]) > 1.0
+            for err in (se3_error(p, v.corrected if v.corrected is not None else v.believed)
+                        for v, p in zip(self.views[:-1], poses[:-1], strict=True))
+        )
+        if moved:
+            self.reintegrate(list(poses))
+            return
+        view = self.views[-1]
+        view.scan = rebase_scan(view.scan, poses[-1])
+        view.corrected = np.asarray(poses[-1]).copy()
+        self.pvs.integrate(view.scan)
+        self.registered = True
 
     def reintegrate(self, poses: Sequence[Pose]) -> None:
         """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
@@ -808,6 +879,7 @@ class SceneSession:
         for view in self.views:
             self.pvs.integrate(view.scan)
         self.mover.pvs = self.pvs
+        self.registered = True
 
     # -- the whole loop --------------------------------------------------------------------------
     def step(self) -> bool:

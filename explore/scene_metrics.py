@@ -169,7 +169,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
         "timings_s": summary["timings_s"],
         "objects_found": summary["objects_found"],
     }
-    if session.pose_graph is not None:
+    if session.registered:
         out["pose_graph"] = pose_graph_errors(session)
     return out
 

@@ -76,14 +76,18 @@ class Mover:
     noise : execute with the robot's positioning noise
     occupied_from : PVS probability from which a robot point counts as colliding
     seed : seeds IK restarts and the execution noise
+    planning_time : time limit of one motion plan (s)
+    min_path_fraction : shortest reachable share of a scan path that is still scanned
     """
 
     def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
-                 occupied_from: float = 0.75, seed: int = 0, planning_time: float = 2.0) -> None:
+                 occupied_from: float = 0.75, seed: int = 0, planning_time: float = 2.0,
+                 min_path_fraction: float = 0.4) -> None:
         self.sim = sim
         self.robot = sim.robot
         self.noise = bool(noise)
         self.occupied_from = float(occupied_from)
+        self.min_path_fraction = float(min_path_fraction)
         self.rng = np.random.default_rng(seed)
         self.pvs: Any = None
         self.free_flyer = self.robot is None or self.robot.name == "free_flyer"
@@ -114,17 +118,38 @@ class Mover:
         self.robot.set_config(self.robot.q)  # fk may move the bodies
         return pose
 
-    def reach(self, target: Target) -> Array | list | None:
-        """Configuration(s) that realise ``target``: one for a view, the sweep for a scan path; None if unreachable."""
+    def plausible(self, eye: Array, focus: Array) -> bool:
+        """Cheap pre-filter before IK: a fixed-base arm only sees objects from its own side
+        (its eye is not farther from the base than the object); anything else passes."""
+        base = getattr(self.robot, "base_pose", None)
+        if self.free_flyer or self.base_dofs or base is None:
+            return True
+        here = np.asarray(base)[:2, 3]
+        return float(np.linalg.norm(eye[:2] - here)) <= float(np.linalg.norm(focus[:2] - here)) + 0.05
+
+    def reach(self, target: Target) -> tuple[Target, list] | None:
+        """(target, configurations) realising ``target``, or None if unreachable.
+
+        A view needs one IK solution. A scan path needs IK for every 2 cm portion with
+        continuity (:func:`explore.motion.linear_scan_path_ik`); if only a leading part of at
+        least ``min_path_fraction`` is reachable, the path is shortened to that part.
+        """
         if self.free_flyer:
-            return []
+            return target, []
         robot = self.robot
         if isinstance(target, ScanPath):
             from .motion import linear_scan_path_ik
 
-            ik = linear_scan_path_ik(robot, target, rng=self.rng)
-            return list(ik.configs) if ik.complete else None
-        return robot.ik(np.asarray(target, dtype=float), self.rng)
+            ik = linear_scan_path_ik(robot, target, step=0.02, rng=self.rng)
+            if ik.reachable < 2 or ik.fraction < self.min_path_fraction:
+                return None
+            if not ik.complete:
+                end = target.end.copy()
+                end[:3, 3] = ik.poses[ik.reachable - 1][:3, 3]
+                target = ScanPath(target.start, end, target.speed)
+            return target, list(ik.configs)
+        q = robot.ik(np.asarray(target, dtype=float), self.rng)
+        return None if q is None else (target, [q])
 
     # -- motion ----------------------------------------------------------------------------
     def _problem(self) -> Any:
@@ -134,15 +159,16 @@ class Mover:
         space_free = None if pvs is None else (lambda points: pvs.probability(points) < limit)
         return MotionProblem(self.robot, space_free=space_free)
 
-    def move(self, target: Target, configs: Array | list | None = None) -> Move | None:
+    def move(self, target: Target, configs: list | None = None) -> Move | None:
         """Go to ``target`` (IK unless ``configs`` from :meth:`reach` is given); None if impossible."""
         if self.free_flyer:
             return self._fly(target)
         if configs is None:
-            configs = self.reach(target)
-        if configs is None:
-            self.failed_moves += 1
-            return None
+            reached = self.reach(target)
+            if reached is None:
+                self.failed_moves += 1
+                return None
+            target, configs = reached
         sweep = np.atleast_2d(np.asarray(configs, dtype=float))
         robot = self.robot
         start = np.asarray(robot.q, dtype=float).copy()

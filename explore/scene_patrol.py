@@ -48,10 +48,10 @@ def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, s
     for ring in surround_poses(focus, float(height), d_min, d_max, step, start):
         for pose in ring:
             target = as_target(scene.sim.sensor, pose, None, float(np.linalg.norm(pose[:3, 3] - focus)))
-            configs = scene.mover.reach(target)
-            if configs is None:
+            reached = scene.mover.reach(target)
+            if reached is None:
                 continue
-            view = scene.add_view(target, "surround", configs=configs)
+            view = scene.add_view(reached[0], "surround", configs=reached[1])
             if view is not None:
                 taken.append(view)
             break

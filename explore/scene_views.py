@@ -38,7 +38,10 @@ def overview_targets(spec: Any, sensor: Any, robot: Any = None) -> list[Target]:
     lo, hi = np.asarray(spec.region_min, dtype=float), np.asarray(spec.region_max, dtype=float)
     centre = 0.5 * (lo + hi)
     if sensor.geometry == "line":
-        return _lawn_mower(lo, hi, sensor)
+        view = np.array([0.0, 0.0, -1.0])
+        if spec.overview is not None:
+            view = np.asarray(spec.overview[3:], dtype=float) - np.asarray(spec.overview[:3], dtype=float)
+        return _lawn_mower(lo, hi, sensor, view / np.linalg.norm(view))
     if spec.overview is not None:
         eye, target = np.asarray(spec.overview[:3]), np.asarray(spec.overview[3:])
         return [look_at(eye, target)]
@@ -58,19 +61,35 @@ def overview_targets(spec: Any, sensor: Any, robot: Any = None) -> list[Target]:
     return out
 
 
-def _lawn_mower(lo: Array, hi: Array, sensor: Any, overlap: float = 0.2) -> list[ScanPath]:
-    """Parallel top-down scan paths over the region box (rows along x, stepping in y)."""
+def _lawn_mower(lo: Array, hi: Array, sensor: Any, view: Array, overlap: float = 0.2) -> list[ScanPath]:
+    """Parallel scan paths over the region box, the sensor looking along ``view``.
+
+    Each path sweeps horizontally across ``view`` at the sensor's optimal distance from the
+    middle height of the region; the rows step along the horizontal part of ``view`` so that
+    neighbouring stripes overlap by ``overlap`` on the region's floor.
+    """
     standoff = float(sensor.optimal_distance)
-    width = 2.0 * standoff * math.tan(math.radians(float(getattr(sensor, "fan_deg", 24.0))) / 2.0) * (1.0 - overlap)
-    height = hi[2] + standoff - 0.5 * (hi[2] - lo[2])
-    rows = max(1, int(math.ceil((hi[1] - lo[1]) / width)))
-    ys = lo[1] + (np.arange(rows) + 0.5) * (hi[1] - lo[1]) / rows
+    sweep = np.cross(view, [0.0, 0.0, 1.0])
+    if np.linalg.norm(sweep) < 1e-6:  # looking straight down: sweep along x, rows along y
+        sweep, across = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    else:
+        sweep /= np.linalg.norm(sweep)
+        across = np.cross([0.0, 0.0, 1.0], sweep)
+    elevation = math.asin(min(1.0, abs(float(view[2]))))
+    width = 2.0 * standoff * math.tan(math.radians(float(getattr(sensor, "fan_deg", 24.0))) / 2.0)
+    step = width * (1.0 - overlap) / max(math.sin(elevation), 0.3)
+    corners = np.array([[x, y] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
+    span = corners @ across[:2]
+    rows = max(1, int(math.ceil((span.max() - span.min()) / step)))
+    middle = np.array([*(0.5 * (lo[:2] + hi[:2])), 0.5 * (lo[2] + hi[2])])
+    length = float(np.ptp(corners @ sweep[:2])) + 0.04
     out = []
-    for y in ys:
-        # the sensor looks down and sweeps along world x; its fan spans world y
-        pose = frame_from(np.array([0.0, 0.0, -1.0]), np.array([1.0, 0.0, 0.0]), [0.5 * (lo[0] + hi[0]), y, height])
-        extent = np.array([[lo[0], y, lo[2]], [hi[0], y, lo[2]]])
-        out.append(path_over(pose, extent, standoff, getattr(sensor, "speed", 0.05), max_length=float(hi[0] - lo[0])))
+    for k in range(rows):
+        offset = span.min() + (k + 0.5) * (span.max() - span.min()) / rows - float(middle[:2] @ across[:2])
+        focus = middle + offset * across
+        pose = frame_from(view, sweep, focus - standoff * view)
+        ends = np.array([focus - 0.5 * length * sweep, focus + 0.5 * length * sweep])
+        out.append(path_over(pose, ends, standoff, getattr(sensor, "speed", 0.05), margin=0.0, max_length=length))
     return out
 
 
