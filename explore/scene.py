@@ -90,6 +90,7 @@ class SceneObject:
     rivals: list[Hypothesis] = field(default_factory=list)
     rejected: list[dict[str, Any]] = field(default_factory=list)
     view_hypotheses: list[tuple[int, Hypothesis]] = field(default_factory=list)
+    checked_views: set[tuple[int, str]] = field(default_factory=set)
     fused: FusedPose | None = None
     multi_views: int = 0
     modelling_scans: int = 0
@@ -165,7 +166,7 @@ class SceneSession:
     model_scans : scan budget per modelled object; ``model_coverage`` stops earlier at ĉ_m
     retry_scans : re-try recognition after each of the first ``retry_scans`` modelling scans
     multi_view_views : view budget per ambiguous object; ``multi_view_agree`` per-view
-        hypotheses must agree (fused cluster) before an ambiguous object counts as recognised
+        hypotheses must agree (fused cluster) before an object counts as recognised
     noise : execute motions with the robot's positioning noise
     planner : motion planner plugin name (robots other than the free flyer)
     run_name : recorded as the provenance of modelled objects
@@ -200,7 +201,7 @@ class SceneSession:
         model_coverage: float = 0.75,
         retry_scans: int = 3,
         multi_view_views: int = 10,
-        multi_view_agree: int = 3,
+        multi_view_agree: int = 2,
         noise: bool = True,
         planner: str | None = None,
         run_name: str = "run",
@@ -445,8 +446,11 @@ class SceneSession:
     def validate(self, obj: SceneObject) -> str:
         """Apply the q_h threshold (Eq. 3.10) and the PVS votes (Eq. 3.11); set the object's status.
 
-        recognised: the best surviving hypothesis has no rival; ambiguous: another model or pose
-        survives nearly as well; unknown: nothing survives (a wrong match is rejected here).
+        recognised: the best surviving hypothesis has no rival and the per-view hypotheses of at
+        least ``multi_view_agree`` views agree with it (fused on SE(3)); ambiguous: another
+        model or pose survives nearly as well, or no second view confirms it yet (one view of a
+        mug whose handle is hidden fits any rotation); unknown: nothing survives (a wrong match
+        is rejected here).
         """
         start = time.perf_counter()
         obj.rejected = []
@@ -467,18 +471,21 @@ class SceneSession:
             return obj.status
         best = survivors[0]
         obj.model, obj.pose, obj.q_h, obj.v_h = best.model, best.pose, best.q_h, best.diagnostics["v_h"]
-        obj.rivals = rivals(survivors)
+        obj.rivals = rivals(survivors, meshes={m.name: m.mesh for m in self.models})
         if obj.rivals:
             obj.status = AMBIGUOUS
-        elif obj.view_hypotheses and not self._fusion_agrees(obj):
-            obj.status = AMBIGUOUS
-        else:
+            return obj.status
+        if self._split_residual(obj) is not None:  # the rest was another object: recognise what is left
+            self.recognise(obj)
+            return self.validate(obj)
+        self.collect_view_hypotheses(obj)
+        self.fuse(obj)
+        if self._fusion_agrees(obj):
             obj.status = RECOGNISED
             if obj.recognised_after_views is None:
                 obj.recognised_after_views = len(self.views)
-            if self._split_residual(obj) is not None:  # the rest was another object: recognise what is left
-                self.recognise(obj)
-                return self.validate(obj)
+        else:  # not yet confirmed by a second view (Kriegel Sec. 5.6.2): take more views
+            obj.status = AMBIGUOUS
         return obj.status
 
     def _split_residual(self, obj: SceneObject) -> SceneObject | None:
@@ -503,6 +510,7 @@ class SceneSession:
         rest = SceneObject(new_id, dataclasses.replace(obj.cluster.subset(far), id=new_id))
         obj.cluster = obj.cluster.subset(~far)
         obj._sample = None
+        obj.view_hypotheses, obj.checked_views = [], set()
         obj.note(f"{int(far.sum())} points not explained by {obj.model}: split off as object {new_id}")
         rest.note(f"split off object {obj.id}")
         self.objects.append(rest)
@@ -570,14 +578,22 @@ class SceneSession:
         return None
 
     def collect_view_hypotheses(self, obj: SceneObject) -> int:
-        """Per-view hypotheses (for the object's model and its rivals) of every view not yet used."""
+        """Per-view hypotheses (for the object's model and its rivals) of its best-covered and newest views.
+
+        Each view is recognised once per model; hypotheses of another model are dropped when
+        the object's model changes.
+        """
         names = [obj.model, *[r.model for r in obj.rivals]]
+        obj.view_hypotheses = [(v, h) for v, h in obj.view_hypotheses if h.model in names]
         used = {view for view, _ in obj.view_hypotheses}
-        for view in obj.cluster.view_ids:
-            if view not in used:
-                found = self.view_hypothesis(obj, view, names)
-                if found is not None:
-                    obj.view_hypotheses.append((view, found))
+        views = set(self.recognition_cluster(obj).view_ids) | set(obj.cluster.view_ids[-2:])
+        for view in sorted(views):
+            if view in used or (view, obj.model) in obj.checked_views:
+                continue
+            obj.checked_views.add((view, obj.model))
+            found = self.view_hypothesis(obj, view, names)
+            if found is not None:
+                obj.view_hypotheses.append((view, found))
         return len(obj.view_hypotheses)
 
     def settle_from_views(self, obj: SceneObject) -> str:
@@ -592,8 +608,6 @@ class SceneSession:
 
     def multi_view_step(self, obj: SceneObject) -> bool:
         """One more view of an ambiguous object; True when it is resolved or out of views."""
-        if not obj.view_hypotheses:  # per-view hypotheses of the views taken so far
-            self.collect_view_hypotheses(obj)
         view = self.next_view(obj, f"multi-view {obj.id}") if obj.multi_views < self.multi_view_views else None
         if view is None:
             obj.note("no further view for multi-view recognition")
@@ -601,12 +615,8 @@ class SceneSession:
             return True
         obj.multi_views += 1
         self.segment()
-        found = self.view_hypothesis(obj, view.index, [obj.model, *[r.model for r in obj.rivals]])
-        if found is not None:
-            obj.view_hypotheses.append((view.index, found))
         self.recognise(obj)
-        self.fuse(obj)
-        self.validate(obj)
+        self.validate(obj)  # collects the new view's hypothesis and fuses
         self._say(f"object {obj.id}: multi-view {obj.multi_views}, {obj.status}"
                   + (f", fused {len(obj.fused.members)} of {len(obj.view_hypotheses)}" if obj.fused else ""))
         if obj.status == RECOGNISED:

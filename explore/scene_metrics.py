@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .recognition import pose_error
+from .recognition import pose_error, surface_distances
 from .registration import kabsch
 from .typed import Pose
 
@@ -119,6 +119,9 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 correct_recognitions += int(right)
                 row["correct_model"] = right
                 row["pose_error_mm"], row["pose_error_deg"] = _errors(obj.pose, truth if right else None)
+                if right and truth is not None:  # symmetric objects: where the surface is, not the frame
+                    mesh = next(m.mesh for m in session.models if m.name == obj.model)
+                    row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
                 if obj.fused is not None and right:
                     row["fused_error_mm"], row["fused_error_deg"] = _errors(obj.fused.pose, truth)
                     row["fused_members"] = int(len(obj.fused.members))

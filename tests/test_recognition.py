@@ -240,3 +240,22 @@ def test_empty_cluster_and_no_models(scene):
     for recognizer in (PPFRecognizer(), FPFHRansacRecognizer(), VFHRecognizer()):
         assert recognizer.recognize(empty, models, scan) == []
         assert recognizer.recognize(clusters["duck"], [], scan) == []
+
+
+def test_symmetric_poses_are_not_rivals():
+    """A cube turned by 90 deg puts its surface where it was: the same explanation, not an ambiguity."""
+    from scipy.spatial.transform import Rotation
+
+    from explore.meshes import box_mesh
+
+    box = box_mesh(np.array([0.1, 0.1, 0.08]))
+
+    def turned(deg: float, q: float) -> Hypothesis:
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("z", deg, degrees=True).as_matrix()
+        return Hypothesis("box", pose, q, "test", {"q_h": q})
+
+    best, quarter, eighth = turned(0, 0.9), turned(90, 0.88), turned(45, 0.85)
+    assert rivals([best, quarter, eighth]) == [quarter, eighth]
+    assert rivals([best, quarter, eighth], meshes={"box": box}) == [eighth]
+    assert rivals([best, turned(45, 0.5)], meshes={"box": box}) == []  # too weak to compete

@@ -76,7 +76,7 @@ def test_scene_exploration_tree_explains_every_object(small_run):
         assert rows[name]["pose_error_mm"] < 5.0 and rows[name]["pose_error_deg"] < 2.0, rows[name]
     # the mug's handle is hidden from the overview: ambiguous, resolved by multi-view recognition
     mug = rows["mug"]
-    assert 1 <= mug["multi_views"] <= 10 and mug["fused_members"] >= 3
+    assert 1 <= mug["multi_views"] <= 10 and mug["fused_members"] >= 2
     assert mug["fused_error_mm"] < 4.0 and mug["fused_error_deg"] < 1.0, mug
     sorter = rows["sorter"]
     assert sorter["result"] == "modelled" and sorter["coverage"] >= 0.85, sorter
@@ -105,15 +105,17 @@ def test_second_run_recognises_the_modelled_object(registry, small_run, tmp_path
 
     _, db = small_run
     with Simulation(_world(tmp_path, REARRANGED), registry) as sim, ObjectDatabase.open(db) as database:
-        scene = SceneSession(sim, registry, database, seed=1)
-        scene.step()  # overview, segmentation, recognition and validation
+        scene = SceneSession(sim, registry, database, seed=1, multi_view_views=5)
+        scene.step()  # overview, segmentation, recognition, validation
+        scene.resolve_ambiguous()  # a second view confirms each pose
         metrics = scene.metrics()
     rows = {r["name"]: r for r in metrics["objects"]}
     assert all(r["result"] == "recognised" and r["correct_model"] for r in rows.values()), rows
     assert rows["sorter"]["model"].startswith("scene_small-run-obj")
-    assert rows["sorter"]["pose_error_mm"] < 5.0  # the cube's rotation is only defined up to its symmetry
+    # the modelled cube's faces differ only in their holes: its position is sharp, its turn may be off by 90 deg
+    assert rows["sorter"]["pose_error_mm"] < 5.0 and rows["sorter"]["surface_error_mm"] < 8.0
     assert rows["duck"]["pose_error_mm"] < 5.0 and rows["duck"]["pose_error_deg"] < 2.0
-    assert metrics["views"] == 1 and metrics["wrong_matches"]["accepted"] == 0
+    assert metrics["wrong_matches"]["accepted"] == 0 and not metrics["added_to_database"]
 
 
 def test_touching_objects_are_split_after_recognition(registry, tmp_path):
@@ -128,11 +130,13 @@ def test_touching_objects_are_split_after_recognition(registry, tmp_path):
         assert len(scene.segment()) == 1
         scene.recognise_all()
         objects = scene.candidates()
+        assert len(objects) == 2
+        duck = next(o for o in objects if o.model == "duck")
+        rest = next(o for o in objects if o is not duck)
+        assert rest.status == "unexplained" and "split off" in rest.events[0]
+        scene.resolve_ambiguous()  # the duck's pose confirmed by a second view
+        assert duck.status == "recognised"
         metrics = scene.metrics()
-    assert len(objects) == 2
-    duck = next(o for o in objects if o.model == "duck")
-    rest = next(o for o in objects if o is not duck)
-    assert duck.status == "recognised" and rest.status == "unexplained" and "split off" in rest.events[0]
     row = next(r for r in metrics["objects"] if r["name"] == "duck")
     assert row["pose_error_mm"] < 5.0 and row["pose_error_deg"] < 2.0
     block = next(r for r in metrics["objects"] if r["name"] == "block")
