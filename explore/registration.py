@@ -653,15 +653,42 @@ def pose_graph_from_scans(
     return PoseGraphResult(poses_out, believed, list(graph.edges), float(before), float(after))
 
 
+def _turn_about(point: Array, axis: Array, angle: float) -> Pose:
+    """Rotation by ``angle`` about the line through ``point`` along ``axis``."""
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(np.asarray(axis, dtype=float) * angle).as_matrix()
+    out[:3, 3] = point - out[:3, :3] @ point
+    return out
+
+
+def _within(transform: Pose, prediction: Pose, gate: tuple[float, float]) -> bool:
+    """True if an ICP result stays within ``gate`` (m, rad) of its prediction: registration that
+    slid along a symmetric table or a floor is an outlier the odometry rules out."""
+    t_err, r_err = pose_error(transform, prediction)
+    return t_err <= gate[0] and r_err <= gate[1]
+
+
 class IncrementalPoseGraph:
     """The pose graph of :func:`pose_graph_from_scans`, grown one scan at a time.
 
     Each new scan gets an odometry factor to its predecessor (or an absolute kinematic prior
     with ``prior_sigmas``), an ICP factor to its predecessor seeded by the corrected
     predecessor plus the odometry step, and ICP loop closures to at most ``max_links``
-    earlier scans whose predicted overlap is at least ``min_overlap``. Levenberg-Marquardt
-    then re-optimises the whole graph (fast: the ICP edges are computed once). Used by the
-    scene exploration after every view of a noisy mobile base.
+    earlier scans whose predicted overlap is at least ``min_overlap``; an ICP result farther
+    than ``gate`` (m, rad) from its prediction is dropped (a symmetric table lets ICP slide).
+    Levenberg-Marquardt then re-optimises the whole graph (fast: the ICP edges are computed
+    once). Used by the scene exploration after every view of a noisy mobile base.
+
+    With ``plane`` (the floor a mobile base drives on, (a, b, c, d) in world coordinates) the
+    edges come from Görner's Plane ICP instead: the views' points higher than ``min_height``
+    above that plane on upright surfaces, in world coordinates at the estimated poses, are
+    aligned in x, y and yaw only (z, roll and pitch of a base on a floor are known), starting
+    from ``2 yaw_starts + 1`` turns ``yaw_step`` apart about the view (a base's odometry can be
+    off by many degrees: Vasquez-Gomez's sigma_omega = 0.28 rad/s gives ~7 deg per move); the
+    best fit wins and the gate widens to the searched range. Loop closures start from the
+    graph's estimate after the sequential edge (accurate to about a degree), once, and must
+    stay within ``loop_gate`` of it: a loop that converged elsewhere (a far overview and a
+    close view share few edges) would otherwise pull a whole chain.
     """
 
     def __init__(
@@ -675,8 +702,24 @@ class IncrementalPoseGraph:
         robust: str = "huber",
         robust_k: float = 1.345,
         max_iterations: int = 100,
+        gate: tuple[float, float] = (0.1, math.radians(10.0)),
+        plane: Any | None = None,
+        min_height: float = 0.05,
+        yaw_starts: int = 3,
+        yaw_step: float = math.radians(6.0),
+        loop_gate: tuple[float, float] = (0.05, math.radians(3.0)),
     ) -> None:
         self.graph = PoseGraph(robust=robust, robust_k=robust_k)
+        self.gate = gate
+        self.plane = None if plane is None else np.asarray(plane, dtype=float)
+        self.min_height = float(min_height)
+        self.yaw_starts = int(yaw_starts)
+        self.yaw_step = float(yaw_step)
+        if self.plane is not None:  # the multi-start search covers larger odometry errors
+            self.gate = (max(gate[0], 0.3), max(gate[1], (self.yaw_starts + 1) * self.yaw_step))
+        self.edge_sigma = float(edge_sigma)
+        self.points: list[Points3] = []  # per node: local points for planar edges
+        self.loop_gate = loop_gate
         self.odometry_sigmas = odometry_sigmas
         self.prior_sigmas = prior_sigmas
         self.voxel = float(voxel)
@@ -692,8 +735,12 @@ class IncrementalPoseGraph:
     def __len__(self) -> int:
         return len(self.believed)
 
-    def add(self, scan: Scan | Points3, believed: Pose | None = None) -> np.ndarray:
-        """Add a scan (world points at ``believed``, default its own pose); all corrected poses."""
+    def add(self, scan: Scan | Points3, believed: Pose | None = None, odometry_sigmas: Any | None = None) -> np.ndarray:
+        """Add a scan (world points at ``believed``, default its own pose); all corrected poses.
+
+        ``odometry_sigmas`` (6,) is the uncertainty of the motion since the previous scan
+        (default: the graph's ``odometry_sigmas``).
+        """
         if believed is None:
             if not isinstance(scan, Scan):
                 raise ValueError("a believed pose is required for a point array")
@@ -702,17 +749,21 @@ class IncrementalPoseGraph:
         points = transform_points(invert(believed), scan.points()) if isinstance(scan, Scan) else _as_points(
             scan, "scan points")
         i = len(self.believed)
-        anchor = sigmas6(1e-6, 1e-6) if i == 0 else None
+        anchor = sigmas6(1e-6, 1e-6) if i == 0 else None  # the first scan anchors the graph
         self.graph.add_node(believed, self.prior_sigmas if self.prior_sigmas is not None else anchor)
         if i > 0 and self.prior_sigmas is None:
-            self.graph.add_odometry(i - 1, i, invert(self.believed[-1]) @ believed, self.odometry_sigmas)
+            sigmas = self.odometry_sigmas if odometry_sigmas is None else odometry_sigmas
+            self.graph.add_odometry(i - 1, i, invert(self.believed[-1]) @ believed, sigmas)
         self.believed.append(believed)
         self.pyramids.append(_pyramid(points, self.voxel, self.scales))
+        if self.plane is not None:
+            self.points.append(self._upright_points(points, believed))
         if i == 0:
             self.poses = believed[None].copy()
             return self.poses
         predicted = np.concatenate([self.poses, (self.poses[-1] @ invert(self.believed[-2]) @ believed)[None]])
         self._link(i - 1, i, predicted, "icp")
+        predicted = self.graph.optimize(self.max_iterations)
         down_i = np.asarray(self.pyramids[i][1].points)
         candidates = []
         for j in range(i - 1):
@@ -726,11 +777,60 @@ class IncrementalPoseGraph:
         return self.poses
 
     def _link(self, target: int, source: int, estimate: np.ndarray, kind: str) -> None:
+        if self.plane is not None:
+            self._link_planar(target, source, estimate, kind)
+            return
         init = invert(estimate[target]) @ estimate[source]
         result = register_pair(self.pyramids[source], self.pyramids[target], init, self.voxel, self.scales)
-        if result.fitness >= self.min_overlap and result.information is not None:
+        if result.fitness >= self.min_overlap and result.information is not None and _within(
+                result.transformation, init, self.loop_gate if kind == "loop" else self.gate):
             self.graph.add_registration(target, source, result.transformation, result.information * self.scale,
                                         kind=kind, fitness=result.fitness)
+
+    def _plane_icp(self, src: Points3, tgt: Points3, view: Pose, starts: int) -> IcpResult:
+        """Multi-start Plane ICP: ``2 starts + 1`` turns about the view's position, the best fit wins."""
+        result = None
+        for yaw in (0.0, *[sign * k * self.yaw_step for k in range(1, starts + 1) for sign in (1, -1)]):
+            trial = plane_icp(src, tgt, self.plane, init=_turn_about(view[:3, 3], self.plane[:3], yaw),
+                              radius=(0.15, 0.05, 2.0 * self.voxel))
+            if result is None or (trial.fitness, -trial.rmse) > (result.fitness, -result.rmse):
+                result = trial
+        assert result is not None
+        return result
+
+    def _upright_points(self, points: Points3, believed: Pose) -> Points3:
+        """The view's points on surfaces standing up from the floor (sensor frame, one per voxel).
+
+        Floors and table tops constrain nothing in x, y, yaw, and their visible patches change
+        from view to view, which drags a 2-D ICP: only points whose normal is within 45 deg
+        of the floor plane are kept (table edges and legs, object sides, walls).
+        """
+        world = transform_points(believed, points)
+        keep = world @ self.plane[:3] + self.plane[3] > self.min_height
+        local = points[keep]
+        if len(local) == 0:
+            return local
+        keys = np.floor(local / self.voxel).astype(np.int64)
+        local = local[np.sort(np.unique(keys, axis=0, return_index=True)[1])]
+        if len(local) < 10:
+            return local
+        normals = estimate_normals(local, 3.0 * self.voxel) @ believed[:3, :3].T
+        return local[np.abs(normals @ self.plane[:3]) < math.cos(math.radians(45.0))]
+
+    def _link_planar(self, target: int, source: int, estimate: np.ndarray, kind: str) -> None:
+        """Plane ICP (x, y, yaw) of the two views' points above the floor, in world coordinates."""
+        src = transform_points(estimate[source], self.points[source])
+        tgt = transform_points(estimate[target], self.points[target])
+        if len(src) < 20 or len(tgt) < 20:
+            return
+        loop = kind == "loop"  # sequential edges start from odometry, which may be off by many degrees
+        result = self._plane_icp(src, tgt, estimate[source], 0 if loop else self.yaw_starts)
+        gate = self.loop_gate if loop else self.gate
+        if result.fitness < self.min_overlap or not _within(result.transformation, np.eye(4), gate):
+            return
+        measured = invert(estimate[target]) @ result.transformation @ estimate[source]
+        self.graph.add_registration(target, source, measured, sigmas=sigmas6(self.edge_sigma / 0.5, self.edge_sigma),
+                                    kind=kind, fitness=result.fitness)
 
 
 # -- multi-view pose fusion (Kriegel Sec. 5.6.2) -----------------------------------------------

@@ -56,6 +56,7 @@ from .typed import Array, Points3, Pose
 UNEXPLAINED, RECOGNISED, AMBIGUOUS, UNKNOWN, MODELLING, MODELLED = (
     "unexplained", "recognised", "ambiguous", "unknown", "modelling", "modelled")
 EXPLAINED = (RECOGNISED, MODELLED)
+FLOOR = (0.0, 0.0, 1.0, 0.0)  # the plane robot bases drive on (world z = 0)
 
 
 @dataclass
@@ -254,7 +255,7 @@ class SceneSession:
         self.mover.pvs = self.pvs
         self.graph = None  # incremental pose graph, for a robot whose base odometry drifts
         if register and self.mover.base_dofs and noise and hasattr(self.registrar, "incremental"):
-            self.graph = self.registrar.incremental()
+            self.graph = self.registrar.incremental(plane=FLOOR)  # a base on the floor: Plane ICP
         self.views: list[View] = []
         self.objects: list[SceneObject] = []
         self.table: Table | None = None
@@ -324,7 +325,7 @@ class SceneSession:
         self._timed("scan_s", start)
         if self.graph is not None:
             start = time.perf_counter()
-            self._apply(self.graph.add(scan, view.believed))
+            self._apply(self.graph.add(scan, view.believed, self.mover.odometry_sigmas()))
             self._timed("registration_s", start)
         else:
             self.pvs.integrate(scan)

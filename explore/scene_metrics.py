@@ -178,10 +178,30 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
 
 
 def pose_graph_errors(session: SceneSession) -> dict[str, float]:
-    """Mean scan-pose error (mm, deg) of odometry vs the pose graph, against the true poses."""
-    raw = np.array([pose_error(v.believed, v.true_pose) for v in session.views])
-    fixed = np.array([pose_error(v.corrected if v.corrected is not None else v.believed, v.true_pose)
-                      for v in session.views])
-    return {"odometry_mm": float(1e3 * raw[:, 0].mean()), "odometry_deg": float(raw[:, 1].mean()),
-            "corrected_mm": float(1e3 * fixed[:, 0].mean()), "corrected_deg": float(fixed[:, 1].mean()),
-            "views": len(session.views)}
+    """Scan-pose error (mm, deg) of odometry and of the pose graph against the true poses.
+
+    ``*_mm``/``*_deg``: mean absolute error; ``relative_*``: mean error of every pose relative
+    to the first view (the map frame a pose graph anchors; the first view's own odometry
+    error cancels).
+    """
+    from .geometry import invert
+
+    views = session.views
+
+    def mean_error(poses: list[Pose], truths: list[Pose]) -> tuple[float, float]:
+        errors = np.array([pose_error(p, t) for p, t in zip(poses, truths, strict=True)])
+        return float(1e3 * errors[:, 0].mean()), float(errors[:, 1].mean())
+
+    believed = [v.believed for v in views]
+    corrected = [v.corrected if v.corrected is not None else v.believed for v in views]
+    truth = [v.true_pose for v in views]
+    out: dict[str, float] = {"views": len(views)}
+    out["odometry_mm"], out["odometry_deg"] = mean_error(believed, truth)
+    out["corrected_mm"], out["corrected_deg"] = mean_error(corrected, truth)
+    if len(views) > 1:
+        rel_truth = [invert(truth[0]) @ t for t in truth[1:]]
+        out["relative_odometry_mm"], out["relative_odometry_deg"] = mean_error(
+            [invert(believed[0]) @ b for b in believed[1:]], rel_truth)
+        out["relative_corrected_mm"], out["relative_corrected_deg"] = mean_error(
+            [invert(corrected[0]) @ c for c in corrected[1:]], rel_truth)
+    return out

@@ -101,6 +101,8 @@ class Mover:
         self.collisions = 0
         self.failed_moves = 0
         self._pose: Pose | None = None  # free flyer: current sensor pose
+        self._last_path: np.ndarray | None = None  # configurations of the last execution
+        self._odometry_var = np.zeros(2)  # (translation m^2, rotation rad^2) since the last view
 
     # -- queries ---------------------------------------------------------------------------
     @property
@@ -171,9 +173,11 @@ class Mover:
             target, configs = reached
         sweep = np.atleast_2d(np.asarray(configs, dtype=float))
         robot = self.robot
+        problem = self._problem()
+        self._recover(problem)
         start = np.asarray(robot.q, dtype=float).copy()
         t0 = time.perf_counter()
-        plan = self.planner.plan(self._problem(), start, sweep[0], seed=int(self.rng.integers(2**31)))
+        plan = self.planner.plan(problem, start, sweep[0], seed=int(self.rng.integers(2**31)))
         planning_s = time.perf_counter() - t0
         if plan is None:
             self.failed_moves += 1
@@ -182,6 +186,7 @@ class Mover:
         execution = robot.execute(plan, self.rng, noise=self.noise, world="true")
         collisions = len(execution.collisions)
         self._odometry(start, execution)
+        self._back_off(execution)
         true_start = robot.fk(robot.q)
         believed = self.believed_pose()
         true_target: Target = true_start
@@ -190,6 +195,7 @@ class Mover:
             sweep_exec = robot.execute(path, self.rng, noise=self.noise, world="true")
             collisions += len(sweep_exec.collisions)
             self._odometry(path[0], sweep_exec)
+            self._back_off(sweep_exec)
             true_end = robot.fk(robot.q)
             end = true_start.copy()
             end[:3, 3] = true_end[:3, 3]
@@ -211,8 +217,60 @@ class Mover:
         self.travel_m += travel
         return Move(target, start.copy(), travel, 0.0, 0, "straight_line")
 
+    def _recover(self, problem: Any) -> None:
+        """If noise left the robot closer to an obstacle than its planning clearance (planning
+        would refuse to start), drive straight back along the last motion to the first
+        configuration that is valid again."""
+        if problem.is_valid(self.robot.q) or self._last_path is None:
+            return
+        for q in self._last_path[::-1]:
+            if problem.is_valid(q):
+                start = np.asarray(self.robot.q, dtype=float).copy()
+                execution = self.robot.execute(np.vstack([start, q]), self.rng, noise=self.noise, world="true")
+                self.collisions += len(execution.collisions)
+                self._odometry(start, execution)
+                self._back_off(execution)
+                return
+
+    def _accumulate(self, execution: Any) -> None:
+        """Grow the odometry variance by a motion's control noise (the robot plugin's sigmas):
+        per step (sigma dt)^2 in speed and turn rate; the heading error also moves the base
+        sideways over the distance driven."""
+        if not self.base_dofs or not self.noise or len(execution.controls) == 0:
+            return
+        dt = float(getattr(self.robot, "dt", 0.05))
+        steps = len(execution.controls)
+        sigma = np.asarray(execution.sigma, dtype=float)
+        rot_var = float((sigma[self.robot.n_base_controls - 1] * dt) ** 2 * steps)
+        trans_var = float((sigma[0] * dt) ** 2 * steps)
+        ix, iy, _ = self.base_dofs
+        driven = float(np.sum(np.linalg.norm(np.diff(execution.configs[:, [ix, iy]], axis=0), axis=1)))
+        self._odometry_var += [trans_var + driven**2 * (self._odometry_var[1] + rot_var), rot_var]
+
+    def odometry_sigmas(self) -> Array | None:
+        """Sigmas (gtsam Pose3 order: rotation, translation) of the motion since the last call; resets."""
+        if not self.base_dofs or not self.noise:
+            return None
+        trans, rot = np.sqrt(np.maximum(self._odometry_var, 1e-12))
+        self._odometry_var = np.zeros(2)
+        return np.array([rot] * 3 + [trans] * 3)
+
+    def _back_off(self, execution: Any) -> None:
+        """After a contact the robot stops at its last configuration before it (a bumper stop),
+        so that it can plan its way out; the belief moves back with it."""
+        if not execution.collided or len(execution.configs) < 2:
+            return
+        last = np.asarray(execution.configs[-2], dtype=float)
+        step = last - np.asarray(execution.configs[-1], dtype=float)
+        self.robot.q = last
+        self.robot.set_config(last)
+        if self.believed_q is not None:
+            self.believed_q = self.believed_q + step
+
     def _odometry(self, start: Array, execution: Any) -> None:
         """Advance the believed configuration by the nominal motion of the executed controls."""
+        self._last_path = np.asarray(execution.configs, dtype=float)
+        self._accumulate(execution)
         final = np.asarray(execution.final, dtype=float)
         believed = final.copy()
         if self.base_dofs and self.believed_q is not None:
