@@ -689,6 +689,13 @@ class IncrementalPoseGraph:
     graph's estimate after the sequential edge (accurate to about a degree), once, and must
     stay within ``loop_gate`` of it: a loop that converged elsewhere (a far overview and a
     close view share few edges) would otherwise pull a whole chain.
+
+    With ``reference`` (points on the upright surfaces of the known environment -- walls,
+    table edges and legs -- in world coordinates: the map Görner's robot localises in with
+    AMCL) every scan is also Plane-ICP-registered to the map; a fit of at least
+    ``min_reference_fit`` adds an absolute pose factor, so the graph is held in the world and
+    not only at its first scan. Its default sigmas trust the map's heading (1 deg) but hardly
+    its position (0.5 m): one table edge in view fixes the yaw, while the 2-D ICP slides along it.
     """
 
     def __init__(
@@ -708,6 +715,9 @@ class IncrementalPoseGraph:
         yaw_starts: int = 3,
         yaw_step: float = math.radians(6.0),
         loop_gate: tuple[float, float] = (0.05, math.radians(3.0)),
+        reference: Points3 | None = None,
+        reference_sigmas: Any = sigmas6(math.radians(1.0), 0.5),
+        min_reference_fit: float = 0.3,
     ) -> None:
         self.graph = PoseGraph(robust=robust, robust_k=robust_k)
         self.gate = gate
@@ -720,6 +730,10 @@ class IncrementalPoseGraph:
         self.edge_sigma = float(edge_sigma)
         self.points: list[Points3] = []  # per node: local points for planar edges
         self.loop_gate = loop_gate
+        self.reference = None if reference is None else _as_points(reference, "reference")
+        self.reference_sigmas = reference_sigmas
+        self.min_reference_fit = float(min_reference_fit)
+        self.localised: list[int] = []  # nodes with an absolute factor from the reference
         self.odometry_sigmas = odometry_sigmas
         self.prior_sigmas = prior_sigmas
         self.voxel = float(voxel)
@@ -749,7 +763,9 @@ class IncrementalPoseGraph:
         points = transform_points(invert(believed), scan.points()) if isinstance(scan, Scan) else _as_points(
             scan, "scan points")
         i = len(self.believed)
-        anchor = sigmas6(1e-6, 1e-6) if i == 0 else None  # the first scan anchors the graph
+        anchor = None
+        if i == 0:  # the first scan anchors the graph (loosely if the map can localise it)
+            anchor = self.odometry_sigmas if self.reference is not None else sigmas6(1e-6, 1e-6)
         self.graph.add_node(believed, self.prior_sigmas if self.prior_sigmas is not None else anchor)
         if i > 0 and self.prior_sigmas is None:
             sigmas = self.odometry_sigmas if odometry_sigmas is None else odometry_sigmas
@@ -760,8 +776,11 @@ class IncrementalPoseGraph:
             self.points.append(self._upright_points(points, believed))
         if i == 0:
             self.poses = believed[None].copy()
+            if self._localise(0, self.poses):
+                self.poses = self.graph.optimize(self.max_iterations)
             return self.poses
         predicted = np.concatenate([self.poses, (self.poses[-1] @ invert(self.believed[-2]) @ believed)[None]])
+        self._localise(i, predicted)
         self._link(i - 1, i, predicted, "icp")
         predicted = self.graph.optimize(self.max_iterations)
         down_i = np.asarray(self.pyramids[i][1].points)
@@ -787,12 +806,26 @@ class IncrementalPoseGraph:
             self.graph.add_registration(target, source, result.transformation, result.information * self.scale,
                                         kind=kind, fitness=result.fitness)
 
-    def _plane_icp(self, src: Points3, tgt: Points3, view: Pose, starts: int) -> IcpResult:
+    def _localise(self, i: int, estimate: np.ndarray) -> bool:
+        """An absolute factor for node ``i`` from multi-start Plane ICP against the map; True if added."""
+        if self.reference is None or self.plane is None or len(self.points[i]) < 20:
+            return False
+        result = self._plane_icp(transform_points(estimate[i], self.points[i]), self.reference, estimate[i],
+                                 self.yaw_starts, radius=(0.3, 0.1, 0.05, 2.0 * self.voxel))
+        if result.fitness < self.min_reference_fit or not _within(result.transformation, np.eye(4), (0.5, 0.5)):
+            return False
+        self.graph.add_prior(i, result.transformation @ estimate[i], self.reference_sigmas)
+        self.localised.append(i)
+        return True
+
+    def _plane_icp(self, src: Points3, tgt: Points3, view: Pose, starts: int,
+                   radius: Sequence[float] | None = None) -> IcpResult:
         """Multi-start Plane ICP: ``2 starts + 1`` turns about the view's position, the best fit wins."""
         result = None
+        radius = radius or (0.15, 0.05, 2.0 * self.voxel)
         for yaw in (0.0, *[sign * k * self.yaw_step for k in range(1, starts + 1) for sign in (1, -1)]):
             trial = plane_icp(src, tgt, self.plane, init=_turn_about(view[:3, 3], self.plane[:3], yaw),
-                              radius=(0.15, 0.05, 2.0 * self.voxel))
+                              radius=radius)
             if result is None or (trial.fitness, -trial.rmse) > (result.fitness, -result.rmse):
                 result = trial
         assert result is not None

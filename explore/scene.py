@@ -255,7 +255,8 @@ class SceneSession:
         self.mover.pvs = self.pvs
         self.graph = None  # incremental pose graph, for a robot whose base odometry drifts
         if register and self.mover.base_dofs and noise and hasattr(self.registrar, "incremental"):
-            self.graph = self.registrar.incremental(plane=FLOOR)  # a base on the floor: Plane ICP
+            # a base on the floor: Plane ICP between views, each view localised in the known environment
+            self.graph = self.registrar.incremental(plane=FLOOR, reference=environment_reference(sim))
         self.views: list[View] = []
         self.objects: list[SceneObject] = []
         self.table: Table | None = None
@@ -938,6 +939,23 @@ class SceneSession:
         from .scene_metrics import evaluate
 
         return evaluate(self)
+
+
+def environment_reference(sim: Any, spacing: float = 0.01, min_height: float = 0.05) -> Points3:
+    """Points on the upright surfaces of the known environment (walls, table edges and legs):
+    the map a mobile base localises in (a planner may know the environment; objects are left out)."""
+    from .metrics import sample_surface
+
+    parts = []
+    for body in sim.bodies:
+        if body.is_object:
+            continue
+        points, normals = sample_surface(body.mesh, spacing * spacing, seed=0)
+        upright = (np.abs(normals[:, 2]) < math.cos(math.radians(45.0))) & (points[:, 2] > min_height)
+        parts.append(points[upright])
+    out = np.vstack(parts) if parts else np.zeros((0, 3))
+    keys = np.floor(out / spacing).astype(np.int64)
+    return out[np.sort(np.unique(keys, axis=0, return_index=True)[1])] if len(out) else out
 
 
 def _plugin(registry: Any, kind: str, spec: Any) -> Any:
