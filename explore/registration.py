@@ -653,6 +653,61 @@ def pose_graph_from_scans(
     return PoseGraphResult(poses_out, believed, list(graph.edges), float(before), float(after))
 
 
+class LikelihoodField:
+    """A 2-D likelihood field of map points (Thrun's beam-endpoint model, as AMCL's) for
+    correlative scan matching (Olson 2009): brute-force search over x, y and yaw of how well a
+    view's points land on the map, to localise a base whose odometry is off by tens of cm."""
+
+    def __init__(self, points: Points3, resolution: float = 0.02, sigma: float = 0.05, margin: float = 1.0) -> None:
+        from scipy.ndimage import distance_transform_edt
+
+        xy = _as_points(points, "map points")[:, :2]
+        self.resolution = float(resolution)
+        self.origin = xy.min(axis=0) - margin
+        shape = np.ceil((xy.max(axis=0) + margin - self.origin) / self.resolution).astype(int) + 1
+        occupied = np.zeros(shape, dtype=bool)
+        cells = np.floor((xy - self.origin) / self.resolution).astype(int)
+        occupied[cells[:, 0], cells[:, 1]] = True
+        distance = distance_transform_edt(~occupied) * self.resolution
+        self.field = np.exp(-0.5 * (distance / sigma) ** 2)
+
+    def score(self, xy: Array) -> Array:
+        """Mean likelihood of point sets (..., n, 2); points off the map count zero."""
+        cells = np.floor((xy - self.origin) / self.resolution).astype(int)
+        inside = np.all((cells >= 0) & (cells < np.array(self.field.shape)), axis=-1)
+        values = self.field[np.clip(cells[..., 0], 0, self.field.shape[0] - 1),
+                            np.clip(cells[..., 1], 0, self.field.shape[1] - 1)]
+        return np.where(inside, values, 0.0).mean(axis=-1)
+
+    def match(self, xy: Array, pivot: Array, search: float = 0.8, search_yaw: float = math.radians(20.0),
+              points: int = 400) -> tuple[Pose, float]:
+        """Best planar motion (about ``pivot``) of the points ``xy`` onto the map, and its score.
+
+        Coarse to fine: 8 cm / 2 deg steps over the search window, then 2 cm / 0.5 deg around
+        the best; at most ``points`` points (evenly picked) are scored.
+        """
+        xy = np.asarray(xy, dtype=float)
+        xy = xy[np.linspace(0, len(xy) - 1, min(points, len(xy))).astype(int)]
+        pivot = np.asarray(pivot, dtype=float)
+        best = (-1.0, 0.0, np.zeros(2))
+        for half, step, half_yaw, step_yaw in ((search, 0.08, search_yaw, math.radians(2.0)),
+                                               (0.08, 0.02, math.radians(2.0), math.radians(0.5))):
+            offsets = np.arange(-half, half + 1e-9, step)
+            grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 1, 2) + best[2]
+            centre_yaw = best[1]
+            for yaw in centre_yaw + np.arange(-half_yaw, half_yaw + 1e-9, step_yaw):
+                c, s = math.cos(yaw), math.sin(yaw)
+                turned = (xy - pivot) @ np.array([[c, s], [-s, c]]) + pivot
+                scores = self.score(turned[None] + grid)
+                k = int(np.argmax(scores))
+                if scores[k] > best[0]:
+                    best = (float(scores[k]), float(yaw), grid[k, 0].copy())
+        score, yaw, shift = best
+        out = _turn_about(np.array([*pivot, 0.0]), np.array([0.0, 0.0, 1.0]), yaw)
+        out[:2, 3] += shift
+        return out, score
+
+
 def _turn_about(point: Array, axis: Array, angle: float) -> Pose:
     """Rotation by ``angle`` about the line through ``point`` along ``axis``."""
     out = np.eye(4)
@@ -692,10 +747,12 @@ class IncrementalPoseGraph:
 
     With ``reference`` (points on the upright surfaces of the known environment -- walls,
     table edges and legs -- in world coordinates: the map Görner's robot localises in with
-    AMCL) every scan is also Plane-ICP-registered to the map; a fit of at least
-    ``min_reference_fit`` adds an absolute pose factor, so the graph is held in the world and
-    not only at its first scan. Its default sigmas trust the map's heading (1 deg) but hardly
-    its position (0.5 m): one table edge in view fixes the yaw, while the 2-D ICP slides along it.
+    AMCL) every scan is also localised in the map: a correlative search over +-0.8 m and
+    +-20 deg on the map's likelihood field (:class:`LikelihoodField`), then Plane ICP against
+    the map points; a fit of at least ``min_reference_fit`` adds an absolute pose factor, so
+    the graph is held in the world and not only at its first scan. Its default sigmas trust
+    the map's heading (1 deg) more than its position (0.1 m): with one table edge in view the
+    2-D match slides along that edge.
     """
 
     def __init__(
@@ -716,7 +773,7 @@ class IncrementalPoseGraph:
         yaw_step: float = math.radians(6.0),
         loop_gate: tuple[float, float] = (0.05, math.radians(3.0)),
         reference: Points3 | None = None,
-        reference_sigmas: Any = sigmas6(math.radians(1.0), 0.5),
+        reference_sigmas: Any = sigmas6(math.radians(1.0), 0.1),
         min_reference_fit: float = 0.3,
     ) -> None:
         self.graph = PoseGraph(robust=robust, robust_k=robust_k)
@@ -731,6 +788,7 @@ class IncrementalPoseGraph:
         self.points: list[Points3] = []  # per node: local points for planar edges
         self.loop_gate = loop_gate
         self.reference = None if reference is None else _as_points(reference, "reference")
+        self.field = None if self.reference is None else LikelihoodField(self.reference)
         self.reference_sigmas = reference_sigmas
         self.min_reference_fit = float(min_reference_fit)
         self.localised: list[int] = []  # nodes with an absolute factor from the reference
@@ -807,12 +865,14 @@ class IncrementalPoseGraph:
                                         kind=kind, fitness=result.fitness)
 
     def _localise(self, i: int, estimate: np.ndarray) -> bool:
-        """An absolute factor for node ``i`` from multi-start Plane ICP against the map; True if added."""
-        if self.reference is None or self.plane is None or len(self.points[i]) < 20:
+        """An absolute factor for node ``i``: correlative search on the map's likelihood field,
+        then Plane ICP against the map points; True if the fit is good enough to add."""
+        if self.reference is None or self.plane is None or self.field is None or len(self.points[i]) < 20:
             return False
-        result = self._plane_icp(transform_points(estimate[i], self.points[i]), self.reference, estimate[i],
-                                 self.yaw_starts, radius=(0.3, 0.1, 0.05, 2.0 * self.voxel))
-        if result.fitness < self.min_reference_fit or not _within(result.transformation, np.eye(4), (0.5, 0.5)):
+        src = transform_points(estimate[i], self.points[i])
+        coarse, _ = self.field.match(src[:, :2], estimate[i][:2, 3])
+        result = plane_icp(src, self.reference, self.plane, init=coarse, radius=(0.1, 0.05, 2.0 * self.voxel))
+        if result.fitness < self.min_reference_fit:
             return False
         self.graph.add_prior(i, result.transformation @ estimate[i], self.reference_sigmas)
         self.localised.append(i)

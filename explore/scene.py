@@ -941,7 +941,7 @@ class SceneSession:
         return evaluate(self)
 
 
-def environment_reference(sim: Any, spacing: float = 0.01, min_height: float = 0.05) -> Points3:
+def environment_reference(sim: Any, spacing: float = 0.02, min_height: float = 0.05) -> Points3:
     """Points on the upright surfaces of the known environment (walls, table edges and legs):
     the map a mobile base localises in (a planner may know the environment; objects are left out)."""
     from .metrics import sample_surface
