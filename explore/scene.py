@@ -46,7 +46,7 @@ from .geometry import invert, transform_points
 from .meshes import TriMesh
 from .recognition import Hypothesis, Model, rivals
 from .registration import FusedPose, fuse_poses, rebase_scan
-from .scan import Scan, ScanPath
+from .scan import Scan
 from .scene_motion import Mover, Target, target_start
 from .scene_views import as_target, order_by_novelty, overview_targets, viewing_distance, views_around
 from .segmentation import Cluster, Table
@@ -966,4 +966,4 @@ def _plugin(registry: Any, kind: str, spec: Any) -> Any:
     return spec
 
 
-__all__ = ["SceneObject", "SceneSession", "View", "close_holes", "ScanPath"]
+__all__ = ["SceneObject", "SceneSession", "View", "close_holes", "environment_reference"]
