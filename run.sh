@@ -28,7 +28,7 @@ want=$(cat pyproject.toml plugins/examples/*/pyproject.toml 2>/dev/null | sha256
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "installing Python packages into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
-  "$VENV/bin/python" -m pip install -q -e ".[test]"
+  "$VENV/bin/python" -m pip install -q -e ".[test,rerun]"
   echo "$want" > "$stamp"
 fi
 

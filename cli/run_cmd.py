@@ -34,7 +34,7 @@ def _tree_text(root: Any) -> Text:
 
 
 def live_view(root: Any, context: Any) -> Group:
-    """The tree with node statuses plus the run's numbers (scans, ĉ_m, coverage, time)."""
+    """The tree with node statuses plus the run's numbers (scans, ĉ_m, ground-truth c_a, time)."""
     stats = Table.grid(padding=(0, 2))
     stats.add_column(style="bold")
     stats.add_column()
@@ -74,10 +74,8 @@ def register(app: typer.Typer) -> None:
 
         config = RunConfig(
             tree=tree, world=world, strategy=strategy, planner=planner, robot=robot, sensor=sensor, seed=seed,
-            max_scans=max_scans, settings=RunConfig.parse_settings(set_ or []), out=out,
+            max_scans=max_scans, settings=RunConfig.parse_settings(set_ or []), out=out, rerun=rerun,
         )
-        if rerun is not None:
-            config.settings["rerun"] = str(rerun)
         reg = registry()
         interactive = console.is_terminal and not quiet
         last = {"t": 0.0, "line": ""}
@@ -107,6 +105,8 @@ def register(app: typer.Typer) -> None:
         summary = {k: result.metrics.get(k) for k in ("scans", "coverage", "coverage_estimate", "path_length_m")}
         console.print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
         console.print(f"results: {result.out_dir}")
+        if rerun is not None:
+            console.print(f"rerun recording: {rerun} (view with: rerun {rerun})")
         return 0 if result.status == "success" else 1
 
 

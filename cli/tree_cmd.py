@@ -41,7 +41,7 @@ def register(app: typer.Typer) -> None:
         """Print the tree (unicode), or write it as Graphviz dot or PNG."""
         import py_trees
 
-        from explore.run_outputs import write_tree_diagram
+        from explore.run_outputs import tree_dot, write_tree_diagram
         from explore.trees import build
 
         from .main import console
@@ -54,7 +54,7 @@ def register(app: typer.Typer) -> None:
             console.print(py_trees.display.unicode_tree(root), markup=False, highlight=False)
             return
         if format == "dot" and out is None:
-            console.print(py_trees.display.dot_tree(root).to_string(), markup=False, highlight=False)
+            console.print(tree_dot(root).to_string(), markup=False, highlight=False)
             return
         target = out or Path(f"{parsed.path.stem}.{format}")
         target.parent.mkdir(parents=True, exist_ok=True)

@@ -84,8 +84,13 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
         return outcome.status
 
     def terminate(self, new_status: Status) -> None:
+        """Interrupted while its step runs (a timeout, or the tree left the branch): drop the step.
+
+        A step not yet started is cancelled; a running one finishes in the background and
+        the run's later steps do not wait for it (:class:`explore.run.Worker`).
+        """
         if new_status == Status.INVALID and self._future is not None:
-            self._future.cancel()
+            self.context.abandon(self._future, self.name)
             self._future = None
 
     # -- work --------------------------------------------------------------------------------

@@ -59,6 +59,7 @@ class Candidate:
     created: int = 0
     score: float = float("nan")
     diagnostics: dict[str, float] = field(default_factory=dict)
+    beams_cache: Any = field(default=None, repr=False, compare=False)  # the utilities' simulated beams
 
     @property
     def pose(self) -> Pose:
@@ -149,6 +150,7 @@ class PlanningContext:
     mode : the generator mode ("boundary" or "hole" for boundary_hole)
     best_score_diagnostics : diagnostics of the last selected candidate
     rng : the session's random generator
+    support_margin : how far below the support plane (the region floor) a sensor may go
     """
 
     pvs: Any
@@ -171,10 +173,20 @@ class PlanningContext:
     best_diagnostics: dict[str, float] = field(default_factory=dict)
     available: int = 0  # candidates on the stack before the last selection
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    support_margin: float = 0.02
 
     @property
     def region_centre(self) -> Array:
         return 0.5 * (np.asarray(self.region_min) + np.asarray(self.region_max))
+
+    @property
+    def lowest_sensor_z(self) -> float:
+        """Lowest admissible sensor height: the support plane (region floor) less ``support_margin``.
+
+        Objects cannot be viewed from below (thesis Sec. 4.1); a sensor under the support
+        would only look through it.
+        """
+        return float(self.region_min[2]) - self.support_margin
 
 
 # ---------------------------------------------------------------------------------------
@@ -264,6 +276,54 @@ def sample_positions(target: Pose | ScanPath, count: int = 5) -> Points3:
     return target.start[:3, 3] + s * (target.end[:3, 3] - target.start[:3, 3])
 
 
+def segments_hit_boxes(starts: Points3, ends: Points3, boxes: list[tuple[Array, Array]]) -> np.ndarray:
+    """Mask of the segments start->end that pass through any axis-aligned box (lo, hi) (slab test)."""
+    starts = np.asarray(starts, dtype=float).reshape(-1, 3)
+    delta = np.asarray(ends, dtype=float).reshape(-1, 3) - starts
+    hit = np.zeros(len(starts), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / delta
+        for lo, hi in boxes:
+            t1 = (np.asarray(lo) - starts) * inv
+            t2 = (np.asarray(hi) - starts) * inv
+            t1 = np.where(np.isnan(t1), -np.inf, t1)
+            t2 = np.where(np.isnan(t2), np.inf, t2)
+            enter = np.max(np.minimum(t1, t2), axis=1)
+            leave = np.min(np.maximum(t1, t2), axis=1)
+            hit |= (enter <= leave) & (leave >= 0.0) & (enter <= 1.0)
+    return hit
+
+
+def above_support(target: Pose | ScanPath, lowest_z: float) -> bool:
+    """True if the sensor stays at or above ``lowest_z`` along the whole target (thesis Sec. 4.1)."""
+    return bool(np.all(sample_positions(target, 2)[:, 2] >= lowest_z))
+
+
+def clip_above(target: Pose | ScanPath, lowest_z: float, min_length: float = 0.03) -> Pose | ScanPath | None:
+    """The part of a target above ``lowest_z``: a scan path is shortened, a view kept or dropped.
+
+    Returns None if less than ``min_length`` of a path (or no view) remains.
+    """
+    if not isinstance(target, ScanPath):
+        return target if above_support(target, lowest_z) else None
+    a, b = target.start[:3, 3], target.end[:3, 3]
+    za, zb = float(a[2]), float(b[2])
+    if za >= lowest_z and zb >= lowest_z:
+        return target
+    if za < lowest_z and zb < lowest_z:
+        return None
+    s = (lowest_z - za) / (zb - za)  # where the path crosses the limit
+    cut = a + s * (b - a)
+    start, end = target.start.copy(), target.end.copy()
+    if za < lowest_z:
+        start[:3, 3] = cut
+    else:
+        end[:3, 3] = cut
+    if np.linalg.norm(end[:3, 3] - start[:3, 3]) < min_length:
+        return None
+    return ScanPath(start, end, target.speed)
+
+
 def occlusion_free_share(grid: VoxelGrid, target: Pose | ScanPath, focus: Points3, p_block: float = 0.95,
                          samples: int = 5, margin: float | None = None) -> float:
     """Share of (sensor sample, focus point) lines of sight not blocked in the PVS (Alg. 3).
@@ -326,7 +386,8 @@ def repair(candidate: Candidate, ctx: PlanningContext, anchor: Array, standoff: 
     Rotates the viewing direction s_z about s_x (outer loop) and s_y (inner loop) by 0, ±10,
     ..., ±40 degrees, recomputes the frame (Eq. 4.16-4.17) and the path ends (Eq. 4.18)
     around ``anchor`` (the surface part of interest), and returns the first candidate that
-    is occlusion-free and collision-free (cheap occlusion test first), or None.
+    is occlusion-free and collision-free (cheap occlusion test first), or None. A target that
+    takes the sensor below the support plane counts as colliding (thesis Sec. 4.1).
     """
     base = candidate.pose
     s_x, s_y, s_z = base[:3, 0], base[:3, 1], base[:3, 2]
@@ -342,6 +403,8 @@ def repair(candidate: Candidate, ctx: PlanningContext, anchor: Array, standoff: 
                 if pose is None:
                     continue
                 target = make_target(ctx.sensor, pose, extent_points, standoff)
+            if not above_support(target, ctx.lowest_sensor_z):
+                continue
             visible = 1.0 if focus is None else occlusion_free_share(ctx.grid, target, focus, settings.p_block)
             if visible < settings.min_visible:
                 continue

@@ -12,10 +12,17 @@
         result = session.run()
         print(result.metrics["coverage"])      # ground-truth c_a after every scan
 
-Each step is a method so a behaviour tree can call them one at a time: ``initial_target``,
-``acquire``, ``integrate``, ``generate``, ``select``, ``terminate``. The planning side (PVS,
-surface model, candidates, utility, termination) never touches the ground truth; only
-:meth:`ModellingSession.metrics` reads it, through :mod:`explore.metrics`.
+Each step is a method so a behaviour tree can call them one at a time: ``generate``,
+``select``, ``terminate``, ``plan_best`` (or ``plan_initial`` before the first scan),
+``execute``, ``acquire``, ``register``, ``integrate``. ``plan`` checks one candidate (scan-path
+IK in 10 mm portions, the PVS along the scan with the NBS rule, the approach motion by the
+motion-planner plugin, see :mod:`explore.scan_planning`); ``execute`` runs the approach with
+the robot's positioning noise and records collisions with the true world; ``acquire`` runs
+the scan motion and takes the scan; ``integrate`` updates PVS and mesh and appends the
+:class:`ScanRecord` of the iteration (the steps before it leave their numbers in the
+session, so a tree and :meth:`step` record the same). The planning side (PVS, surface
+model, candidates, utility, termination, motion planning) never touches the ground truth;
+only :meth:`ModellingSession.metrics` reads it, through :mod:`explore.metrics`.
 """
 
 from __future__ import annotations
@@ -28,7 +35,10 @@ from typing import Any
 import numpy as np
 
 from .candidates import STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext, frame_from
+from .metrics import GroundTruthMetrics, coverage_auc
+from .motion import Execution
 from .scan import Scan, ScanPath
+from .scan_planning import KEEP_FOR_LATER, ScanMotion, ScanPlan, make_planner
 from .typed import Array, Pose
 from .visibility import VoxelGrid
 
@@ -75,7 +85,18 @@ def resolve_strategy(strategy: Any, registry: Any) -> Any:
 
 
 class ModellingSession:
-    """World + free-flying sensor + strategy -> scans until termination -> metrics.
+    """World + robot + sensor + strategy -> planned, executed scans until termination -> metrics.
+
+    One iteration (:meth:`step`): :meth:`generate` candidates, :meth:`select` the best by
+    the utility, :meth:`terminate` (stop / switch to hole mode), :meth:`plan_best` (scan-path
+    IK in 10 mm portions, the PVS along the scan with the NBS rule, the approach motion by
+    the motion planner; the next best candidates when that fails), :meth:`execute` (approach
+    motion with positioning noise, collisions with the true world), :meth:`acquire` (scan
+    motion + scan), optionally :meth:`register` (local ICP), :meth:`integrate` (PVS, mesh,
+    features; appends the :class:`ScanRecord`). The first scan uses :meth:`plan_initial`.
+    A scan taken with :meth:`acquire` from a pose or scan path (no plan) puts the sensor
+    there, as before motion planning existed. Planning and execution numbers:
+    :meth:`motion_metrics`.
 
     Parameters
     ----------
@@ -85,13 +106,22 @@ class ModellingSession:
     seed : seeds the initial scan path, the sensor noise and random choices
     resolution : PVS voxel edge l_v (thesis: 5 mm)
     max_scans : hard cap on the scans (the thesis runs 30 regardless of the termination)
-    planner : motion planner plugin or None (the free flyer moves in straight lines)
+    planner : motion planner: plugin name, (name or None, params), plugin object, or None for
+        the robot's default (``straight_line`` for the free flyer, ``rrt_connect`` otherwise)
     continue_after_stop : keep scanning to ``max_scans`` after the termination said stop,
         recording the scan count at which it did (the thesis' n_s); for benchmarks
     pvs_params, surface_params : extra keyword arguments of the PVS and the surface model
     fallback_generator : view generator used only when the strategy's generator leaves the
-        stack empty (so that a benchmark run can go on to ``max_scans``); None disables it.
-        Its candidates are recorded with their own source name.
+        stack empty and ``continue_after_stop`` is set (so a benchmark run can go on to
+        ``max_scans``); None (default) disables it. Its scans are recorded with the source
+        ``fallback_<name>`` and counted in ``metrics()["fallback_scans"]``.
+    noise : execute motions with the robot's positioning noise model (Vasquez-Gomez Sec. A6)
+    max_plan_attempts : candidates tried per iteration when planning the best one fails
+    place_first : put the robot at the first scan instead of planning a motion to it (the
+        thesis' free-flying sensor starts at its random initial scan path); None = only for
+        the ``free_flyer`` robot
+    register_scans : :meth:`step` registers each scan to the model (:meth:`register`, the
+        thesis' local ICP) before integrating it, as the ``register_scan`` behaviour does
     region : (min corner, max corner) of the box to model instead of the world's region (scene
         exploration models one cluster's box)
     obstacles : extra (lo, hi) boxes the planning treats as known environment (the rest of the scene)
@@ -100,7 +130,9 @@ class ModellingSession:
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
                  max_scans: int = 30, planner: Any = None, continue_after_stop: bool = False,
                  pvs_params: dict | None = None, surface_params: dict | None = None,
-                 fallback_generator: str | None = "sphere", region: tuple[Array, Array] | None = None,
+                 fallback_generator: str | None = None, noise: bool = True, max_plan_attempts: int = 10,
+                 place_first: bool | None = None, register_scans: bool = False,
+                 region: tuple[Array, Array] | None = None,
                  obstacles: Sequence[tuple[Array, Array]] = ()) -> None:
         from .pvs import PVS
         from .surface import SurfaceModel
@@ -114,7 +146,6 @@ class ModellingSession:
                 part.reset()
         self.seed = seed
         self.max_scans = int(max_scans)
-        self.planner = planner
         self.continue_after_stop = continue_after_stop
         self.sensor = sim.sensor
         self.robot = sim.robot
@@ -143,8 +174,16 @@ class ModellingSession:
         self.first_stop_reason = ""
         self.selection_times: list[float] = []
         self.selection_sizes: list[int] = []
-        self._pending: Candidate | None = None
-        self._metrics = None
+        self._metrics: GroundTruthMetrics | None = None
+        self.max_plan_attempts = max(1, int(max_plan_attempts))
+        self.register_scans = bool(register_scans)
+        self.place_first = (getattr(self.robot, "name", "") == "free_flyer") if place_first is None else place_first
+        self.motion = ScanMotion(self.robot, self.pvs, make_planner(registry, self.robot, planner),
+                                 np.random.default_rng(rng.integers(2**63)), int(rng.integers(1, 2**31 - 1)),
+                                 noise=bool(noise))
+        self.planner = self.motion.planner
+        self.plan_failure = ""
+        self._new_pending()
 
     # -- setup helpers -------------------------------------------------------------------
     def _environment_boxes(self) -> list[tuple[Array, Array]]:
@@ -174,8 +213,8 @@ class ModellingSession:
         return len(self.records)
 
     # -- the steps -----------------------------------------------------------------------
-    def initial_target(self) -> Pose | ScanPath:
-        """Random initial scan among the 5 sides and 8 edges of the region box (thesis Sec. 4.7).
+    def _initial_options(self) -> list[Pose | ScanPath]:
+        """Scans along the 5 sides and 8 edges of the region box (thesis Sec. 4.7).
 
         The bottom side and bottom edges are left out (they overlap the pedestal).
         """
@@ -185,39 +224,110 @@ class ModellingSession:
         options = [(z, x), (x, z), (-x, z), (y, z), (-y, z)]  # (outward normal, sweep)
         options += [((s * x + z) / np.sqrt(2), y) for s in (1, -1)] + [((s * y + z) / np.sqrt(2), x) for s in (1, -1)]
         options += [((sx * x + sy * y) / np.sqrt(2), z) for sx in (1, -1) for sy in (1, -1)]
-        normal, sweep = options[int(self.rng_plan.integers(len(options)))]
         standoff = float(self.sensor.optimal_distance)
-        depth = float(np.abs(normal) @ half)
-        eye = centre + normal * (standoff + 0.5 * depth)
-        pose = frame_from(-normal, sweep, eye)
-        assert pose is not None
-        if self.sensor.geometry != "line":
-            return pose
-        length = float(2.0 * np.abs(sweep) @ half) + 0.04
-        start, end = pose.copy(), pose.copy()
-        start[:3, 3] -= 0.5 * length * pose[:3, 1]
-        end[:3, 3] += 0.5 * length * pose[:3, 1]
-        return ScanPath(start, end, getattr(self.sensor, "speed", 0.05))
+        targets: list[Pose | ScanPath] = []
+        for normal, sweep in options:
+            depth = float(np.abs(normal) @ half)
+            eye = centre + normal * (standoff + 0.5 * depth)
+            pose = frame_from(-normal, sweep, eye)
+            assert pose is not None
+            if self.sensor.geometry != "line":
+                targets.append(pose)
+                continue
+            length = float(2.0 * np.abs(sweep) @ half) + 0.04
+            start, end = pose.copy(), pose.copy()
+            start[:3, 3] -= 0.5 * length * pose[:3, 1]
+            end[:3, 3] += 0.5 * length * pose[:3, 1]
+            targets.append(ScanPath(start, end, getattr(self.sensor, "speed", 0.05)))
+        return targets
 
-    def acquire(self, target: Pose | ScanPath) -> tuple[Scan, float, float]:
-        """Move (free flyer: straight line) and acquire; returns the scan, scan length and travel."""
-        start = target.start if isinstance(target, ScanPath) else target
-        here = self.ctx.sensor_pose
-        travel = 0.0 if here is None else float(np.linalg.norm(start[:3, 3] - here[:3, 3]))
+    def initial_target(self) -> Pose | ScanPath:
+        """Random initial scan among the 5 sides and 8 edges of the region box (thesis Sec. 4.7)."""
+        options = self._initial_options()
+        return options[int(self.rng_plan.integers(len(options)))]
+
+    def initial_candidates(self) -> list[Candidate]:
+        """The random initial scan first, then the other sides and edges (for robots that
+        cannot reach the first one)."""
+        options = self._initial_options()
+        first = int(self.rng_plan.integers(len(options)))
+        order = [(first + k) % len(options) for k in range(len(options))]
+        return [Candidate(options[i], "initial", {"kind": "initial", "option": i}) for i in order]
+
+    def _new_pending(self) -> None:
+        """Numbers of the iteration in progress; :meth:`integrate` turns them into its record."""
+        self._pending: dict[str, Any] = {
+            "t0": time.perf_counter(), "source": "initial", "info": {"kind": "initial"}, "score": float("nan"),
+            "selection_s": 0.0, "candidates": 0, "decision": "", "reason": "", "scan_length": 0.0, "travel": 0.0,
+        }
+
+    def _pend_candidate(self, candidate: Candidate) -> None:
+        self._pending.update(source=candidate.source, info=dict(candidate.info), score=candidate.score)
+
+    def acquire(self, target: Pose | ScanPath | ScanPlan) -> tuple[Scan, float, float]:
+        """Scan; returns the scan, the scan length and the travel since the last scan.
+
+        With a :class:`ScanPlan` (after :meth:`execute`) the robot runs the scan motion from
+        where the approach left it (noise, collisions with the true world) and the sensor
+        scans along the executed motion. With a pose or scan path the sensor is put there
+        (no robot motion; travel = straight distance, as the thesis' free-flying sensor).
+        """
+        if isinstance(target, ScanPlan):
+            executed, run = self.motion.execute_scan(target, self.n_scans + 1)
+            self._pend_candidate(target.candidate)
+            travel = self._pending["travel"] + (self.motion.motions[-1].sensor_path_m if run is not None else 0.0)
+            if run is not None:
+                self._check_collision(run, "scan")
+            target = executed
+        else:
+            start = target.start if isinstance(target, ScanPath) else target
+            here = self.ctx.sensor_pose
+            travel = 0.0 if here is None else float(np.linalg.norm(start[:3, 3] - here[:3, 3]))
+            travel += target.length if isinstance(target, ScanPath) else 0.0
+            end = target.end if isinstance(target, ScanPath) else target
+            if self.robot is not None and hasattr(self.robot, "ik"):
+                q = self.robot.ik(end)
+                if q is not None:
+                    self.robot.q = q
         scan_length = target.length if isinstance(target, ScanPath) else 0.0
         scan = self.sensor.acquire(self.sim, target, self.rng_sensor)
         end = target.end if isinstance(target, ScanPath) else target
-        if self.robot is not None and hasattr(self.robot, "ik"):
-            q = self.robot.ik(end)
-            if q is not None:
-                self.robot.q = q
         self.ctx.sensor_pose = np.asarray(end).copy()
         self.ctx.executed.append(np.asarray(target.mid if isinstance(target, ScanPath) else target).copy())
         self.scans.append(scan)
-        return scan, scan_length, travel + scan_length
+        self._pending.update(scan_length=scan_length, travel=travel)
+        return scan, scan_length, travel
+
+    def register(self, scan: Scan, registrar: Any = None, min_fitness: float = 0.3, max_shift: float = 0.01,
+                 max_angle_deg: float = 3.0) -> tuple[Scan, Any]:
+        """Local ICP of a new scan to the model before integration (Kriegel thesis Sec. 3.2.3).
+
+        ``registrar`` is a registrar plugin with ``register(src, src_n, tgt, tgt_n)`` (default
+        ``icp``: 3 mm radius, 3 iterations, 60 deg normal gate) matching the scan's points to
+        the model mesh. The correction is applied to every beam
+        (:func:`explore.registration.rebase_scan`) unless the match is weak (fitness below
+        ``min_fitness``) or implausibly large (the scan's centroid moves more than
+        ``max_shift``, or it turns more than ``max_angle_deg``); returns the (corrected) scan
+        and the ICP result (None before there is a model).
+        """
+        from .registration import rebase_scan, scan_points_and_normals
+
+        model = self.surface.mesh
+        if len(model.vertices) < 50 or not scan.hits.any():
+            return scan, None
+        registrar = registrar or self.registry.create("registrar", "icp", {}, "<session>")
+        points, normals = scan_points_and_normals(scan)
+        result = registrar.register(points, normals, model.vertices, self.surface.vertex_normals)
+        transform = result.transformation
+        centre = points.mean(axis=0)
+        shift = float(np.linalg.norm(transform[:3, :3] @ centre + transform[:3, 3] - centre))
+        angle = float(np.degrees(np.arccos(np.clip((np.trace(transform[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))))
+        if result.fitness < min_fitness or shift > max_shift or angle > max_angle_deg:
+            return scan, result
+        return rebase_scan(scan, transform @ scan.sensor_poses[0]), result
 
     def integrate(self, scan: Scan) -> dict[str, Any]:
-        """PVS + surface model + surface features into the PVS (thesis Fig. 4.1)."""
+        """PVS + surface model + surface features into the PVS (thesis Fig. 4.1); records the scan."""
         start = time.perf_counter()
         out: dict[str, Any] = {"pvs": self.pvs.integrate(scan), "surface": self.surface.integrate(scan)}
         resolution = self.pvs.resolution
@@ -234,43 +344,81 @@ class ModellingSession:
         self.ctx.density_history.append(float(self.surface.mean_density()))
         self.ctx.unknown_history.append(int(self.pvs.counts()["unknown"]))
         out["integrate_s"] = time.perf_counter() - start
+        pending = self._pending
+        self.records.append(ScanRecord(
+            index=self.n_scans, source=pending["source"], info=pending["info"], scan_length_m=pending["scan_length"],
+            travel_m=pending["travel"], selection_s=pending["selection_s"], candidates=pending["candidates"],
+            coverage_estimate=coverage, coverage_border=float(self.surface.coverage_border()),
+            density=self.ctx.density_history[-1], unknown_voxels=self.ctx.unknown_history[-1],
+            decision=pending["decision"], reason=pending["reason"], score=pending["score"],
+            step_s=time.perf_counter() - pending["t0"],
+        ))
+        self._new_pending()
         return out
 
+    def integrate_view(self, scan: Scan, sensor_pose: Array, source: str | None = None) -> dict[str, Any]:
+        """Integrate a scan taken outside the session (a scene exploration view) from ``sensor_pose``;
+        it is recorded with ``source``, or with the selected candidate's source when None."""
+        self.scans.append(scan)
+        self.ctx.executed.append(np.asarray(sensor_pose, dtype=float).copy())
+        if source is not None:
+            self._pending.update(source=source, info={"kind": source}, score=float("nan"))
+        return self.integrate(scan)
+
     def generate(self) -> int:
-        """Add the generator's candidates to the stack (stale ones are dropped); returns how many."""
+        """Add the generator's candidates to the stack (stale ones are dropped); returns how many.
+
+        Candidates the robot surely cannot reach (capability map of a fixed-base arm, see
+        :class:`explore.scan_planning.CapabilityMap`) are left out before they are scored.
+        """
         keep = ("sphere",) if getattr(self.generator, "persistent", False) else ()
         self.stack.drop_stale(self.ctx.iteration, self.ctx.executed, keep_sources=keep)
         new = [c for c in self.generator.generate(self.ctx)
-               if not any(self.stack._similar(c.pose, pose) for pose in self.ctx.executed)]
+               if not any(self.stack._similar(c.pose, pose) for pose in self.ctx.executed)
+               and self.motion.may_reach(c.target)]
         self.stack.push(new)
         if len(self.stack) == 0 and self.fallback is not None and self.continue_after_stop:
-            if hasattr(self.fallback, "reset"):
-                self.fallback.reset()
-            extra = self.fallback.generate(self.ctx)
-            for cand in extra:
-                cand.source = f"fallback_{cand.source}"
+            extra = self._fallback_candidates()
             self.stack.push(extra)
             new = new + extra
+        self._pending["candidates"] = len(self.stack)
         return len(new)
 
-    def select(self) -> Candidate | None:
-        """Score the stack with the utility and pop the best candidate (timed)."""
+    def _fallback_candidates(self) -> list[Candidate]:
+        if hasattr(self.fallback, "reset"):
+            self.fallback.reset()
+        extra = [c for c in self.fallback.generate(self.ctx) if self.motion.may_reach(c.target)]
+        for cand in extra:
+            cand.source = f"fallback_{cand.source}"
+        return extra
+
+    def select(self, rescore: bool = True) -> Candidate | None:
+        """Score the stack with the utility and pop the best candidate (timed).
+
+        ``rescore=False`` pops the next best by the scores of the last scoring (the PVS has
+        not changed since), used when planning to the best candidate failed.
+        """
         self.ctx.available = len(self.stack)
         if len(self.stack) == 0:
             return None
-        start = time.perf_counter()
         items = list(self.stack)
-        scores = np.asarray(self.utility.score(items, self.ctx), dtype=float)
-        for cand, value in zip(items, scores, strict=True):
-            cand.score = float(value)
+        if rescore:
+            start = time.perf_counter()
+            scores = np.asarray(self.utility.score(items, self.ctx), dtype=float)
+            for cand, value in zip(items, scores, strict=True):
+                cand.score = float(value)
+            elapsed = time.perf_counter() - start
+            self.selection_times.append(elapsed)
+            self.selection_sizes.append(len(items))
+            self._pending["selection_s"] = elapsed
+        else:
+            scores = np.array([c.score for c in items], dtype=float)
         best = int(np.argmax(np.where(np.isfinite(scores), scores, -np.inf)))
-        elapsed = time.perf_counter() - start
-        self.selection_times.append(elapsed)
-        self.selection_sizes.append(len(items))
         chosen = self.stack.pop(best)
         self.ctx.best_diagnostics = dict(chosen.diagnostics)
         if hasattr(self.generator, "remember"):
             self.generator.remember(chosen)
+        self._pend_candidate(chosen)
         return chosen
 
     def terminate(self) -> Decision:
@@ -280,48 +428,142 @@ class ModellingSession:
         decision = self.termination.decide(self.ctx)
         if decision.action == SWITCH:
             self.ctx.mode = "hole"
+        self._pending.update(decision=decision.action, reason=decision.reason)
         return decision
 
+    def plan(self, candidate: Candidate) -> ScanPlan:
+        """Plan one candidate: scan-path IK, PVS along the scan (NBS rule), approach motion.
+
+        See :mod:`explore.scan_planning`. The first scan is planned against the known
+        environment only (the PVS knows nothing yet); with ``place_first`` it needs no
+        approach (the sensor is put at the scan start).
+        """
+        start = None if (self.n_scans == 0 and self.place_first) else np.asarray(self.robot.q, dtype=float)
+        return self.motion.plan(candidate, start, self.n_scans + 1, use_pvs=self.n_scans > 0)
+
+    def plan_initial(self) -> ScanPlan | None:
+        """Plan the random initial scan, else the next side or edge of the region; None if none is reachable."""
+        failures: list[ScanPlan] = []
+        for candidate in self.initial_candidates():
+            result = self.plan(candidate)
+            if result.ok:
+                self._pend_candidate(candidate)
+                return result
+            failures.append(result)
+        self.plan_failure = _failure_summary("initial scans", failures)
+        return None
+
+    def plan_best(self, candidate: Candidate | None) -> ScanPlan | None:
+        """Plan the selected candidate; if that fails, the next best ones (up to ``max_plan_attempts``).
+
+        Candidates blocked by unknown space or without an approach motion go back on the
+        stack for later iterations; unreachable ones and those through occupied space are
+        discarded (NBS rule). When none of the strategy's candidates can be planned (a robot
+        with a limited workspace), the fallback generator's candidates are scored and tried
+        the same way. None (reason in ``plan_failure``) if no candidate could be planned.
+        """
+        failures: list[ScanPlan] = []
+        kept: list[Candidate] = []
+        result = self._plan_in_order(candidate, failures, kept)
+        if result is None and self.fallback is not None:
+            self.stack.push(self._fallback_candidates())
+            seconds = self.selection_times[-1] if self.selection_times else 0.0
+            candidate = self.select()
+            if candidate is not None and self.selection_times:  # one selection time per scan
+                self._pending["selection_s"] = seconds + self.selection_times.pop()
+                self.selection_sizes.pop()
+                if self.selection_times:
+                    self.selection_times[-1] = self._pending["selection_s"]
+            result = self._plan_in_order(candidate, failures, kept)
+        self.stack.push(kept)
+        if result is not None:
+            self._pend_candidate(result.candidate)
+            return result
+        self.plan_failure = _failure_summary("candidates", failures)
+        return None
+
+    def _plan_in_order(self, candidate: Candidate | None, failures: list[ScanPlan],
+                       kept: list[Candidate]) -> ScanPlan | None:
+        """Plan ``candidate``, then the next best by the last scores, until one works or the budget is spent."""
+        tried = 0
+        while candidate is not None and tried < self.max_plan_attempts:
+            result = self.plan(candidate)
+            tried += 1
+            if result.ok:
+                return result
+            failures.append(result)
+            if result.verdict in KEEP_FOR_LATER:
+                kept.append(candidate)
+            candidate = self.select(rescore=False) if tried < self.max_plan_attempts else None
+        return None
+
+    def execute(self, plan: ScanPlan) -> Execution | None:
+        """Run the approach motion with the robot's positioning noise (collisions with the true world).
+
+        A collision that stops the motion (robot ``on_collision: stop``) ends the session
+        with status ``collided``.
+        """
+        run = self.motion.execute_approach(plan, self.n_scans + 1)
+        if run is not None:
+            self._pending["travel"] = self.motion.motions[-1].sensor_path_m
+            self._check_collision(run, "approach")
+        return run
+
+    def _check_collision(self, run: Execution, kind: str) -> None:
+        if run.collided and not run.completed:
+            bodies = ", ".join(run.collisions[0].bodies)
+            self.finish("collided", f"collision with {bodies} during the {kind} motion of scan {self.n_scans + 1}")
+
     def step(self) -> ScanRecord | None:
-        """One iteration: (generate, select, terminate,) acquire, integrate. None when finished."""
+        """One iteration: (generate, select, terminate,) plan, execute, acquire, (register,) integrate.
+
+        None when finished.
+        """
         if self.status != "running":
             return None
-        t0 = time.perf_counter()
-        selection_s, n_cands, decision = 0.0, 0, Decision()
         if self.n_scans == 0:
-            candidate = Candidate(self.initial_target(), "initial", {"kind": "initial"})
+            plan = self.plan_initial()
+            if plan is None:
+                return self.finish("failed", f"no reachable initial scan ({self.plan_failure})")
         else:
             if self.n_scans >= self.max_scans:
-                return self._finish("stopped", f"max_scans = {self.max_scans} reached")
+                return self.finish("stopped", f"max_scans = {self.max_scans} reached")
             self.generate()
-            n_cands = len(self.stack)
             candidate = self.select()
-            selection_s = self.selection_times[-1] if candidate is not None else 0.0
             decision = self.terminate()
             if decision.stop and self.first_stop is None:
                 self.first_stop, self.first_stop_reason = self.n_scans, decision.reason
             if decision.stop and not self.continue_after_stop:
-                return self._finish("stopped", decision.reason)
+                return self.finish("stopped", decision.reason)
             if candidate is None:
                 if self.first_stop is None:
                     self.first_stop, self.first_stop_reason = self.n_scans, "no candidate left"
-                return self._finish("stopped", "no candidate left")
-        scan, scan_length, travel = self.acquire(candidate.target)
+                return self.finish("stopped", "no candidate left")
+            plan = self.plan_best(candidate)
+            if plan is None:
+                reason = f"no reachable candidate ({self.plan_failure})"
+                if self.first_stop is None:
+                    self.first_stop, self.first_stop_reason = self.n_scans, reason
+                return self.finish("stopped", reason)
+        self.execute(plan)
+        if self.status != "running":
+            return None
+        scan, _, _ = self.acquire(plan)
+        if self.status != "running":
+            return None
+        if self.register_scans:
+            scan, _ = self.register(scan)
         self.integrate(scan)
-        record = ScanRecord(
-            index=self.n_scans, source=candidate.source, info=dict(candidate.info), scan_length_m=scan_length,
-            travel_m=travel, selection_s=selection_s, candidates=n_cands,
-            coverage_estimate=self.ctx.coverage_history[-1], coverage_border=float(self.surface.coverage_border()),
-            density=self.ctx.density_history[-1], unknown_voxels=self.ctx.unknown_history[-1],
-            decision=decision.action, reason=decision.reason, score=candidate.score,
-            step_s=time.perf_counter() - t0,
-        )
-        self.records.append(record)
-        return record
+        return self.records[-1]
 
-    def _finish(self, status: str, reason: str) -> None:
+    def finish(self, status: str, reason: str) -> None:
+        """End the session: ``stopped`` (a normal end), ``failed`` or ``collided``, with the reason."""
         self.status, self.reason = status, reason
         return None
+
+    def motion_metrics(self) -> dict[str, Any]:
+        """Planning success and time, executed trajectories, collisions (see docs/metrics.md)."""
+        return self.motion.metrics()
 
     def run(self, progress: Callable[[ScanRecord], None] | None = None) -> ModellingResult:
         """Step until the termination (or ``max_scans``) stops the run."""
@@ -336,9 +578,10 @@ class ModellingSession:
         return ModellingResult(self.status, self.reason, self.records, self.metrics())
 
     # -- evaluation (the only place that reads the ground truth) -------------------------
-    def ground_truth(self) -> Any:
+    def ground_truth(self) -> GroundTruthMetrics:
+        """The ground-truth evaluator of this world (observable surface computed once)."""
         if self._metrics is None:
-            self._metrics = GroundTruth(self.sim)
+            self._metrics = GroundTruthMetrics(self.sim)
         return self._metrics
 
     def coverage_curve(self) -> list[float]:
@@ -347,11 +590,29 @@ class ModellingSession:
         return [gt.coverage(points) for points in self.point_history]
 
     def metrics(self, ground_truth: bool = True) -> dict[str, Any]:
-        """Scans, c_a and ĉ_m per scan, density, path lengths, selection times, status."""
+        """Scans, c_a and ĉ_m per scan, RMS error, Chamfer distance, coverage AUC, path lengths,
+        selection times, status.
+
+        ``rms_error_m`` / ``chamfer_m`` are of the final reconstruction (``*_at_stop_m`` at the
+        scan n_s the termination first said stop); ``coverage_auc`` is the mean c_a over
+        ``max_scans`` scans (a run that ended early keeps its last value). Scans that came
+        from the session's fallback generator are counted in ``fallback_scans``.
+        """
         curve = self.coverage_curve() if ground_truth and self.point_history else []
         for record, value in zip(self.records, curve, strict=False):
             record.coverage = value
         n_s = self.first_stop if self.first_stop is not None else self.n_scans
+        quality: dict[str, float] = {}
+        if curve:
+            gt = self.ground_truth()
+            final = gt.evaluate(self.point_history[-1])
+            at_stop = gt.evaluate(self.point_history[max(n_s, 1) - 1])
+            quality = {
+                "rms_error_m": final["rms_error"], "chamfer_m": final["chamfer"],
+                "rms_error_at_stop_m": at_stop["rms_error"], "chamfer_at_stop_m": at_stop["chamfer"],
+                "coverage_auc": coverage_auc(curve, self.max_scans),
+            }
+        fallback = sum(r.source.startswith("fallback_") for r in self.records)
         return {
             "strategy": self.strategy.name,
             "world": self.sim.spec.name,
@@ -363,6 +624,7 @@ class ModellingSession:
             "reason": self.reason,
             "coverage": curve,
             "coverage_at_stop": curve[n_s - 1] if curve and n_s >= 1 else float("nan"),
+            **quality,
             "coverage_estimate": [r.coverage_estimate for r in self.records],
             "coverage_border": [r.coverage_border for r in self.records],
             "density": [r.density for r in self.records],
@@ -372,47 +634,15 @@ class ModellingSession:
             "selection_s": list(self.selection_times),
             "selection_candidates": list(self.selection_sizes),
             "sources": [r.source for r in self.records],
+            "fallback_scans": int(fallback),
         }
 
 
-class GroundTruth:
-    """c_a of a surface model against the object's ground truth (via :mod:`explore.metrics` when present)."""
+def _failure_summary(what: str, failures: list[ScanPlan]) -> str:
+    """``"10 candidates tried: 6 unreachable, 4 unknown"`` (the verdicts of failed plans)."""
+    counts: dict[str, int] = {}
+    for failure in failures:
+        counts[failure.verdict] = counts.get(failure.verdict, 0) + 1
+    detail = ", ".join(f"{n} {verdict}" for verdict, n in counts.items())
+    return f"{len(failures)} {what} tried: {detail}" if failures else f"no {what}"
 
-    def __init__(self, sim: Any, tau: float = 0.003) -> None:
-        self.tau = tau
-        self.impl = None
-        try:
-            from .metrics import GroundTruthMetrics
-
-            self.impl = GroundTruthMetrics(sim, tau=tau)
-        except ImportError:
-            self.impl = None
-        if self.impl is None:
-            self._fallback(sim)
-
-    def _fallback(self, sim: Any) -> None:
-        """Dense samples of the object surface above the support (no visibility test)."""
-        from scipy.spatial import cKDTree
-
-        mesh = sim.object_mesh()
-        tri = mesh.vertices[mesh.triangles]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        rng = np.random.default_rng(0)
-        count = int(min(60000, max(2000, area.sum() / (0.0015**2))))
-        pick = rng.choice(len(tri), count, p=area / area.sum())
-        u, v = rng.random((2, count))
-        flip = u + v > 1
-        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-        pts = tri[pick, 0] + u[:, None] * (tri[pick, 1] - tri[pick, 0]) + v[:, None] * (tri[pick, 2] - tri[pick, 0])
-        floor = sim.spec.region_min[2] + 0.004
-        self.samples = pts[pts[:, 2] > floor]
-        self._tree = cKDTree
-
-    def coverage(self, points: Any) -> float:
-        points = np.asarray(points, dtype=float).reshape(-1, 3)
-        if self.impl is not None:
-            return float(self.impl.coverage(points))
-        if len(points) == 0:
-            return 0.0
-        dist, _ = self._tree(points).query(self.samples, distance_upper_bound=self.tau)
-        return float(np.mean(np.isfinite(dist)))

@@ -2,19 +2,23 @@
 
 :class:`RunContext` is the value every behaviour receives in ``setup(context=...)``: the
 simulation, the registry, the run's blackboard namespace, a worker thread for long steps,
-the trace and a place (``state``) where behaviours keep library objects (the modelling
-session, the scene, the database). :func:`execute` ticks the tree until it finishes and
-writes the run directory (``metrics.json``, ``trace.jsonl``, meshes, ``pvs.npz``, pictures,
-the tree as dot/PNG). The schema of ``metrics.json`` is documented in ``docs/metrics.md``.
+the trace, the optional Rerun log and a place (``state``) where behaviours keep library
+objects (the modelling session, the scene, the database). :func:`execute` checks every
+name and setting, ticks the tree until it finishes and writes the run directory
+(``metrics.json``, ``trace.jsonl``, meshes, ``pvs.npz``, pictures, the tree as dot/PNG).
+The schema of ``metrics.json`` is documented in ``docs/metrics.md``.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+import queue
+import shutil
+import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor, wait
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -23,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from .errors import BadInput
-from .params import parse_assignment
+from .params import parse_assignment, validate_params
 
 METRICS_SCHEMA_VERSION = 1
 _RUN_IDS = itertools.count(1)
@@ -44,6 +48,7 @@ class RunConfig:
     settings: dict[str, Any] = field(default_factory=dict)  # --set key=value
     out: Path | None = None
     max_ticks: int = 100000
+    rerun: Path | None = None  # --rerun FILE.rrd
 
     @staticmethod
     def parse_settings(items: list[str]) -> dict[str, Any]:
@@ -58,10 +63,88 @@ class RunConfig:
         return {k[len(head) :]: v for k, v in self.settings.items() if k.startswith(head)}
 
 
+class Worker:
+    """Runs the submitted steps one after another in a daemon thread.
+
+    A step abandoned while it runs (e.g. a ``timeout`` decorator stopped its behaviour)
+    cannot be killed in Python: it finishes in its own thread and its result is dropped,
+    while the steps submitted after it run in a fresh thread instead of waiting behind it.
+    """
+
+    def __init__(self, name: str = "explore-worker") -> None:
+        self.name = name
+        self.abandoned = 0
+        self._lock = threading.Lock()
+        self._queue: queue.SimpleQueue | None = None
+        self._start()
+
+    def _start(self) -> None:
+        self._queue = queue.SimpleQueue()
+        thread = threading.Thread(target=self._loop, args=(self._queue,), daemon=True,
+                                  name=f"{self.name}-{self.abandoned}")
+        thread.start()
+
+    def _loop(self, own: queue.SimpleQueue) -> None:
+        while True:
+            item = own.get()
+            with self._lock:
+                if own is not self._queue:  # retired after an abandoned step: hand the work over
+                    if item is not None:
+                        self._queue.put(item)
+                    return
+            if item is None:
+                return
+            future, fn = item
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                result = fn()
+            except BaseException as error:  # noqa: BLE001 - delivered to whoever polls the future
+                future.set_exception(error)
+            else:
+                future.set_result(result)
+
+    def submit(self, fn: Callable[[], Any]) -> Future:
+        future: Future = Future()
+        with self._lock:
+            self._queue.put((future, fn))
+        return future
+
+    def abandon(self, future: Future) -> bool:
+        """Drop a step: cancel it if it has not started; else move later steps to a fresh thread.
+
+        Returns True if the step was still running (it goes on in the background).
+        """
+        if future.cancel() or future.done():
+            return False
+        with self._lock:
+            old = self._queue
+            self.abandoned += 1
+            self._start()
+            while True:
+                try:
+                    self._queue.put(old.get_nowait())
+                except queue.Empty:
+                    break
+            old.put(None)
+        return True
+
+    def close(self) -> None:
+        with self._lock:
+            while True:
+                try:
+                    item = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not None:
+                    item[0].cancel()
+            self._queue.put(None)
+
+
 class RunContext:
     """Shared state of one run; behaviours get it in ``setup(context=...)``."""
 
-    GLOBAL_SETTINGS = ("resolution", "tau", "surface.point_spacing")
+    GLOBAL_SETTINGS = ("resolution",)  # read by start_modelling (PVS voxel size)
 
     def __init__(self, config: RunConfig, registry: Any, out_dir: Path) -> None:
         from .simulation import Simulation
@@ -76,15 +159,23 @@ class RunContext:
         self.state: dict[str, Any] = {}
         self.events: list[dict[str, Any]] = []
         self.status_line = ""
+        self.root: Any = None  # the py_trees root once built
+        self.rerun: Any = None
+        self.sim: Any = None
         self._trace_file = open(out_dir / "trace.jsonl", "w", encoding="utf-8")  # noqa: SIM115
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="explore-worker")
+        self._worker = Worker()
         self._futures: list[Future] = []
-        spec = load_world_spec(config.world)
-        self.sim = Simulation(spec)
         try:
+            spec = load_world_spec(config.world)
+            self.sim = Simulation(spec)
             sensor = (config.sensor or spec.sensor.plugin, self._plugin_params("sensor", spec.sensor))
             robot = (config.robot or spec.robot.plugin, self._plugin_params("robot", spec.robot))
             self.sim.attach_plugins(registry, sensor=sensor, robot=robot)
+            if config.rerun is not None:
+                from .rerun_log import RerunLog
+
+                self.rerun = RerunLog(config.rerun)
+                self.rerun.world(self.sim)
         except BaseException:
             self.close()
             raise
@@ -97,9 +188,17 @@ class RunContext:
 
     # -- workers -----------------------------------------------------------------------------
     def submit(self, fn: Callable[[], Any]) -> Future:
-        future = self._pool.submit(fn)
+        """Run ``fn`` in the run's worker (one step at a time); poll the future while ticking."""
+        future = self._worker.submit(fn)
         self._futures = [f for f in self._futures if not f.done()] + [future]
         return future
+
+    def abandon(self, future: Future, node: str = "") -> None:
+        """A behaviour stopped waiting for its step (timeout, or its branch was left)."""
+        if self._worker.abandon(future):
+            self.trace("abandoned", node=node, note="the step goes on in the background; later steps use a "
+                                                    "fresh worker thread")
+        self._futures = [f for f in self._futures if f is not future]
 
     def wait_for_work(self, timeout: float) -> None:
         """Block until a worker finishes or ``timeout`` passes (no busy ticking)."""
@@ -118,10 +217,18 @@ class RunContext:
         return time.perf_counter() - self.started
 
     def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._worker.close()
+        for future in self._futures:
+            if not future.done():
+                future.cancel()
+        pending = [f for f in self._futures if not f.done()]
+        if pending:  # a step that is running: let it end before the simulation goes away
+            wait(pending, timeout=10.0)
+        if self.rerun is not None:
+            self.rerun.close()
         if not self._trace_file.closed:
             self._trace_file.close()
-        if getattr(self, "sim", None) is not None:
+        if self.sim is not None:
             self.sim.close()
 
 
@@ -171,52 +278,133 @@ def execute(
     registry: Any,
     on_tick: Callable[[Any, RunContext], None] | None = None,
 ) -> RunResult:
-    """Load, validate, build and tick the tree; write the run directory."""
-    import py_trees
-    from py_trees.common import Status
+    """Check the inputs, build and tick the tree, write the run directory.
 
-    from .trees import build, load_tree
-
-    tree_file = load_tree(config.tree, registry)
-    overrides = _behaviour_overrides(config, tree_file, registry)
-    out_dir = prepare_out_dir(config.out or default_out_dir(config))
-    context = RunContext(config, registry, out_dir)
+    Every name and setting is checked before the run directory is created. Bad input found
+    later (e.g. a behaviour raising :class:`BadInput`) removes what this run wrote and
+    re-raises; any other ending writes ``metrics.json`` with the status and reason.
+    """
+    tree_file, overrides = check_inputs(config, registry)
+    path = config.out or default_out_dir(config)
+    created = not path.exists()
+    out_dir = prepare_out_dir(path)
     try:
-        root = build(tree_file.root, registry, overrides, context.namespace)
-        tree = py_trees.trees.BehaviourTree(root)
-        tree.setup(context=context)
-        context.trace("start", tree=tree_file.name, world=context.sim.spec.name, seed=config.seed)
-        previous: dict[int, str] = {}
-        ticks = 0
-        while ticks < config.max_ticks:
-            tree.tick()
-            ticks += 1
-            for node in root.iterate():
-                status = node.status.value
-                if previous.get(id(node)) != status:
-                    previous[id(node)] = status
-                    if node is not root or status != "RUNNING":
-                        message = node.feedback_message
-                        context.trace("status", tick=ticks, node=node.name, status=status, message=message)
-            if on_tick is not None:
-                on_tick(root, context)
-            if root.status in (Status.SUCCESS, Status.FAILURE):
-                break
-            context.wait_for_work(0.1)
-        if root.status == Status.SUCCESS:
-            status, reason = "success", root.feedback_message or "tree succeeded"
-        elif root.status == Status.FAILURE:
-            status, reason = "failure", _failure_reason(root)
-        else:
-            status, reason = "failure", f"tree still running after max_ticks={config.max_ticks}"
-        tree.shutdown()
+        context = RunContext(config, registry, out_dir)
+    except BadInput:
+        _remove_run_files(out_dir, created)
+        raise
+    try:
+        status, reason, root = _tick(config, registry, context, tree_file, overrides, on_tick)
         from .run_outputs import write_outputs
 
         metrics = write_outputs(context, tree_file, root, status, reason)
         context.trace("end", status=status, reason=reason)
         return RunResult(status, reason, metrics, out_dir)
+    except BadInput:
+        context.close()
+        _remove_run_files(out_dir, created)
+        raise
+    except BaseException as error:  # an interrupt or a crash: still leave the metrics behind
+        from .run_outputs import write_outputs
+
+        reason = "interrupted" if isinstance(error, KeyboardInterrupt) else f"crashed: {type(error).__name__}: {error}"
+        context.trace("end", status="failure", reason=reason)
+        write_outputs(context, tree_file, None, "failure", reason)
+        raise
     finally:
         context.close()
+
+
+def _tick(config: RunConfig, registry: Any, context: RunContext, tree_file: Any,
+          overrides: dict[str, dict[str, Any]], on_tick: Callable[[Any, RunContext], None] | None,
+          ) -> tuple[str, str, Any]:
+    """Tick until the root finishes (or ``max_ticks``); trace every status change."""
+    import py_trees
+    from py_trees.common import Status
+
+    from .trees import build
+
+    root = build(tree_file.root, registry, overrides, context.namespace)
+    context.root = root
+    tree = py_trees.trees.BehaviourTree(root)
+    tree.setup(context=context)
+    context.trace("start", tree=tree_file.name, world=context.sim.spec.name, seed=config.seed)
+    previous: dict[int, str] = {}
+    ticks = 0
+    while ticks < config.max_ticks:
+        tree.tick()
+        ticks += 1
+        for node in root.iterate():
+            status = node.status.value
+            if previous.get(id(node)) != status:
+                previous[id(node)] = status
+                if node is not root or status != "RUNNING":
+                    context.trace("status", tick=ticks, node=node.name, status=status, message=node.feedback_message)
+        if on_tick is not None:
+            on_tick(root, context)
+        if root.status in (Status.SUCCESS, Status.FAILURE):
+            break
+        context.wait_for_work(0.1)
+    if root.status == Status.SUCCESS:
+        ends = [getattr(p, "end_reason", "") for p in context.state.values()]
+        status, reason = "success", root.feedback_message or next((e for e in ends if e), "tree succeeded")
+    elif root.status == Status.FAILURE:
+        status, reason = "failure", _failure_reason(root)
+    else:
+        status, reason = "failure", f"tree still running after max_ticks={config.max_ticks}"
+    tree.shutdown()
+    return status, reason, root
+
+
+RUN_FILES = ("trace.jsonl", "metrics.json", "metrics.json.tmp", "tree.dot", "tree.png", "model.ply", "model.png",
+             "pvs.npz", "coverage.png")
+
+
+def _remove_run_files(out_dir: Path, created: bool) -> None:
+    """Undo a run stopped by bad input: its own files, and the folder if this run created it."""
+    if created:
+        shutil.rmtree(out_dir, ignore_errors=True)
+        return
+    for name in RUN_FILES:
+        (out_dir / name).unlink(missing_ok=True)
+
+
+def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
+    """Everything that can be checked before a run starts: the tree, the world, plugin names,
+    ``--set`` keys and plugin parameters, the Rerun file. Raises :class:`BadInput`."""
+    from .scan_planning import DEFAULT_PLANNERS
+    from .trees import load_tree
+    from .world import load_world_spec
+
+    tree_file = load_tree(config.tree, registry)
+    overrides = _behaviour_overrides(config, tree_file, registry)
+    spec = load_world_spec(config.world)
+    robot = config.robot or spec.robot.plugin
+    chosen = {
+        "strategy": config.strategy,
+        "motion_planner": config.planner or DEFAULT_PLANNERS.get(robot, "rrt_connect"),
+        "robot": robot,
+        "sensor": config.sensor or spec.sensor.plugin,
+    }
+    options = {"strategy": "--strategy", "motion_planner": "--planner", "robot": "--robot", "sensor": "--sensor"}
+    prefixes = {"strategy": "strategy", "motion_planner": "planner", "robot": "robot", "sensor": "sensor"}
+    given = {"strategy": config.strategy, "motion_planner": config.planner, "robot": config.robot,
+             "sensor": config.sensor}
+    for kind, name in chosen.items():
+        if name is None:
+            continue
+        if given[kind] is not None or kind == "motion_planner":
+            info = registry.get(kind, name, options[kind], None)
+        else:  # the world's choice
+            info = registry.get(kind, name, str(spec.path), f"{prefixes[kind]}.plugin")
+        scoped = config.scoped(prefixes[kind])
+        if scoped:
+            validate_params(info.params, scoped, "--set", f"{prefixes[kind]}.")
+    if config.rerun is not None:
+        from .rerun_log import check_rerun
+
+        check_rerun(config.rerun)
+    return tree_file, overrides
 
 
 def _failure_reason(root: Any) -> str:
@@ -224,9 +412,10 @@ def _failure_reason(root: Any) -> str:
     from py_trees.common import Status
 
     reason = root.feedback_message or "tree failed"
-    for node in root.iterate():
-        if node.status == Status.FAILURE and node.feedback_message and not node.children:
-            reason = f"{node.name}: {node.feedback_message}"
+    failed = [n for n in root.iterate() if n.status == Status.FAILURE and n.feedback_message and not n.children]
+    steps = [n for n in failed if not getattr(n, "is_condition", False)]  # a condition's failure is an answer
+    for node in steps or failed:
+        reason = f"{node.name}: {node.feedback_message}"
     return reason
 
 
@@ -245,4 +434,6 @@ def _behaviour_overrides(config: RunConfig, tree_file: Any, registry: Any) -> di
         else:
             valid = sorted(in_tree) + ["sensor.*", "robot.*", "strategy.*", "planner.*", *RunContext.GLOBAL_SETTINGS]
             raise BadInput("--set", key, f"unknown setting (valid prefixes: {', '.join(valid)})")
+    for name, values in overrides.items():
+        validate_params(registry.get("behaviour", name).params, values, "--set", f"{name}.")
     return overrides

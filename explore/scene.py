@@ -668,7 +668,7 @@ class SceneSession:
         obj.status = MODELLING
         obj.note(f"modelling in box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}")
         for index in obj.cluster.view_ids:  # what the scene already saw of it
-            self._integrate_model_scan(session, self.views[index], "scene")
+            session.integrate_view(self.views[index].scan, self.views[index].believed, "scene")
         session.ctx.sensor_pose = self.mover.believed_pose()
         return session
 
@@ -681,20 +681,6 @@ class SceneSession:
         if self.table is not None:  # the box rests on the support plane
             lo[2] = max(lo[2] - 0.02, float(self.table.world_T_table[2, 3]) + 0.002)
         return lo, hi
-
-    def _integrate_model_scan(self, session: Any, view: View, source: str, candidate: Any = None) -> None:
-        from .modelling import ScanRecord
-
-        session.integrate(view.scan)
-        session.scans.append(view.scan)
-        session.ctx.executed.append(view.believed.copy())
-        session.records.append(ScanRecord(
-            index=session.n_scans, source=source, info=dict(getattr(candidate, "info", {}) or {}),
-            scan_length_m=0.0, travel_m=0.0, selection_s=session.selection_times[-1] if candidate else 0.0,
-            candidates=len(session.stack), coverage_estimate=session.ctx.coverage_history[-1],
-            coverage_border=float(session.surface.coverage_border()), density=session.ctx.density_history[-1],
-            unknown_voxels=session.ctx.unknown_history[-1], score=getattr(candidate, "score", math.nan),
-        ))
 
     def model_step(self, obj: SceneObject) -> bool:
         """One NBS iteration for an unknown object; True when its modelling is finished.
@@ -734,7 +720,7 @@ class SceneSession:
             obj.note("modelling stopped: no reachable view left")
             return True
         obj.modelling_scans += 1
-        self._integrate_model_scan(session, view, getattr(candidate, "source", "scene_view"), candidate)
+        session.integrate_view(view.scan, view.believed, None if candidate is not None else "scene_view")
         session.ctx.sensor_pose = view.believed.copy()
         self.segment()
         obj.coverage_estimate = float(session.ctx.coverage_history[-1])

@@ -28,26 +28,28 @@ P_v(x) = prod of (1 - p) over the voxels in front of x (Isler's visibility proba
 With ``visited`` the traversal quantities count every voxel once per candidate (thesis
 Sec. 4.5.3 visited marking); the first-hit and rear-side counts are always distinct.
 
-Hierarchical ray tracing (Vasquez-Gomez Sec. HRT) is offered as a speed option: beams are
-grouped into bundles of ``2**a`` neighbours; the bundle's central beam is traced through a
-max-pooled grid ``2**a`` times coarser, and only bundles that touch a non-free coarse voxel
-are traced at full resolution (free voxels carry almost no information).
+Hierarchical ray tracing (Vasquez-Gomez Sec. HRT, level ``a``) is a speed option: the beams
+of a candidate are grouped into bundles of 2^a x 2^a neighbours (along the stripe / image row
+and across frames / image columns); the bundle's central beam is cast through a max-pooled
+grid 2^a times coarser (dilated by one coarse voxel, so every beam of the bundle lies inside
+the cast corridor) up to the first coarse voxel that is not free. A bundle that meets none
+is not traced at all; the others are traced at full resolution from one coarse voxel before
+that point. What is lost is the entropy of the skipped free voxels (p <= 0.25) and their
+share of P_v; ``benchmarks/reproduce_kriegel.py --hierarchy a`` measures speed and cost.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import get_num_threads, njit, prange
 
 from .typed import Array, Points3
 
 ENTROPY, UNKNOWN, QUAL_LIT, QUAL_NEED, TRAVERSED, OCC_FIRST, UNK_FIRST = range(7)
 OCCLUSION, UNOBSERVED, REAR_VOXEL, REAR_ENTROPY, PROXIMITY, HITS = range(7, 13)
 N_ACC = 13
-LN2 = math.log(2.0)
 ACC_NAMES = (
     "entropy", "unknown", "quality_literal", "quality_need", "traversed", "occupied_first",
     "unknown_first", "occlusion_aware", "unobserved", "rear_voxel", "rear_entropy", "proximity", "hits",
@@ -70,6 +72,7 @@ class VoxelGrid:
     density: np.ndarray | None = None
     normal: np.ndarray | None = None
     proximity: np.ndarray | None = None
+    entropy: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -101,6 +104,15 @@ class VoxelGrid:
             self.density = np.zeros(self.shape, dtype=np.float32)
             self.normal = np.zeros(self.shape + (3,), dtype=np.float32)
 
+    def ensure_entropy(self) -> None:
+        """H(p) in bits per voxel, computed once per snapshot (the kernel then only looks it up)."""
+        if self.entropy is not None:
+            return
+        p = np.clip(self.prob.astype(np.float64), 1e-9, 1.0 - 1e-9)
+        h = -(p * np.log2(p) + (1.0 - p) * np.log2(1.0 - p))
+        h[(self.prob <= 1e-9) | (self.prob >= 1.0 - 1e-9)] = 0.0
+        self.entropy = h.astype(np.float32)
+
     def ensure_proximity(self, p_occupied: float = 0.75, sigma: float = 0.01) -> None:
         """w(x) = exp(-d(x)/sigma), d = distance to the nearest occupied voxel (proximity count)."""
         if self.proximity is not None:
@@ -114,23 +126,20 @@ class VoxelGrid:
         dist = distance_transform_edt(~occupied) * self.resolution
         self.proximity = np.exp(-dist / sigma).astype(np.float32)
 
-    def coarse(self, level: int) -> VoxelGrid:
-        """Grid ``2**level`` times coarser holding the max 'non-freeness' of its children."""
+    def coarse(self, level: int, dilate: bool = False) -> VoxelGrid:
+        """Grid ``2**level`` times coarser holding the max occupancy of its children (as an
+        octree's inner nodes); with ``dilate`` also of the 26 neighbouring coarse voxels."""
         k = 2**level
         nx, ny, nz = self.shape
         pad = [(0, (-n) % k) for n in (nx, ny, nz)]
         p = np.pad(self.prob, pad, constant_values=0.0)
         s = p.shape
         pooled = p.reshape(s[0] // k, k, s[1] // k, k, s[2] // k, k).max(axis=(1, 3, 5))
+        if dilate:
+            from scipy.ndimage import maximum_filter
+
+            pooled = maximum_filter(pooled, size=3, mode="nearest")
         return VoxelGrid(pooled.astype(np.float32), self.origin.copy(), self.resolution * k)
-
-
-@njit(cache=True)
-def _entropy(p: float) -> float:
-    if p <= 1e-9 or p >= 1.0 - 1e-9:
-        return 0.0
-    x = float(p)
-    return -(x * math.log(x) + (1.0 - x) * math.log(1.0 - x)) / LN2
 
 
 @njit(cache=True)
@@ -153,24 +162,25 @@ def _box_interval(o0, o1, o2, d0, d1, d2, lo0, lo1, lo2, hi0, hi1, hi2):  # noqa
     return t0, t1
 
 
-@njit(cache=True)
-def _trace_kernel(
-    prob, has_feat, border, density, normal, prox, origin, res,
-    origins, dirs, group, n_groups, tmin, tmax,
-    p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out,
+@njit(cache=True, nogil=True)
+def _trace_range(
+    prob, ent, has_feat, border, density, normal, prox, origin, res,
+    origins, dirs, tstart, group, r0, r1, tmin, tmax,
+    p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out, stamp_t, stamp_f,
 ):  # noqa: ANN001, ANN202
+    """Beams r0 .. r1-1 (whole candidates); ``stamp_*`` are this worker's visited marks."""
     nx, ny, nz = prob.shape
-    stamp_t = np.zeros((nx, ny, nz), dtype=np.int32)
-    stamp_f = np.zeros((nx, ny, nz), dtype=np.int32)
     hi0 = origin[0] + nx * res
     hi1 = origin[1] + ny * res
     hi2 = origin[2] + nz * res
-    for r in range(origins.shape[0]):
+    for r in range(r0, r1):
         g = group[r]
         tag = g + 1
         o0, o1, o2 = origins[r, 0], origins[r, 1], origins[r, 2]
         d0, d1, d2 = dirs[r, 0], dirs[r, 1], dirs[r, 2]
         t0, t1 = _box_interval(o0, o1, o2, d0, d1, d2, origin[0], origin[1], origin[2], hi0, hi1, hi2)
+        if t0 < tstart[r]:
+            t0 = tstart[r]  # HRT: the coarse pass proved the beam free up to here
         if t0 < 0.0:
             t0 = 0.0
         if t1 > tmax:
@@ -212,13 +222,12 @@ def _trace_kernel(
             dtz = big
         pv = 1.0
         first_done = False
-        t_enter = t0
         while True:
             t_exit = min(tx, ty, tz)
             p = float(prob[i, j, k])
             counted = t_exit > tmin
             if counted:
-                h = _entropy(p)
+                h = float(ent[i, j, k])
                 fresh = (not visited) or stamp_t[i, j, k] != tag
                 if visited:
                     stamp_t[i, j, k] = tag
@@ -260,12 +269,11 @@ def _trace_kernel(
                     if q >= unk_lo and q < unk_hi and stamp_f[i2, j2, k2] != -tag:
                         stamp_f[i2, j2, k2] = -tag
                         out[g, REAR_VOXEL] += 1.0
-                        out[g, REAR_ENTROPY] += pv * _entropy(q)
+                        out[g, REAR_ENTROPY] += pv * float(ent[i2, j2, k2])
                 break
             pv *= 1.0 - p
             if t_exit >= t1:
                 break
-            t_enter = t_exit
             if tx <= ty and tx <= tz:
                 i += si
                 tx += dtx
@@ -277,15 +285,31 @@ def _trace_kernel(
                 tz += dtz
             if i < 0 or i >= nx or j < 0 or j >= ny or k < 0 or k >= nz:
                 break
-        _ = t_enter
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True, parallel=True)
+def _trace_chunks(
+    prob, ent, has_feat, border, density, normal, prox, origin, res,
+    origins, dirs, tstart, group, bounds, tmin, tmax,
+    p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out,
+):  # noqa: ANN001, ANN202
+    """One worker per chunk of whole candidates, each with its own visited marks."""
+    for c in prange(len(bounds) - 1):
+        stamp_t = np.zeros(prob.shape, dtype=np.int32)
+        stamp_f = np.zeros(prob.shape, dtype=np.int32)
+        _trace_range(prob, ent, has_feat, border, density, normal, prox, origin, res,
+                     origins, dirs, tstart, group, bounds[c], bounds[c + 1], tmin, tmax,
+                     p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out, stamp_t, stamp_f)
+
+
+@njit(cache=True, nogil=True)
 def _first_blocked_kernel(prob, origin, res, origins, dirs, tmax, p_block, out):  # noqa: ANN001, ANN202
+    """Amanatides-Woo walk of each ray to the entry of its first voxel with p >= p_block."""
     nx, ny, nz = prob.shape
     hi0 = origin[0] + nx * res
     hi1 = origin[1] + ny * res
     hi2 = origin[2] + nz * res
+    big = 1e30
     for r in range(origins.shape[0]):
         out[r] = np.inf
         o0, o1, o2 = origins[r, 0], origins[r, 1], origins[r, 2]
@@ -297,18 +321,42 @@ def _first_blocked_kernel(prob, origin, res, origins, dirs, tmax, p_block, out):
             t1 = tmax[r]
         if t0 >= t1:
             continue
-        # sample at a quarter voxel: simple and robust for short occlusion tests
-        step = 0.25 * res
-        t = t0
-        while t < t1:
-            i = int(np.floor((o0 + d0 * t - origin[0]) / res))
-            j = int(np.floor((o1 + d1 * t - origin[1]) / res))
-            k = int(np.floor((o2 + d2 * t - origin[2]) / res))
-            if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz:
-                if prob[i, j, k] >= p_block:
-                    out[r] = t
-                    break
-            t += step
+        t = t0 + 1e-9
+        i = min(max(int(np.floor((o0 + d0 * t - origin[0]) / res)), 0), nx - 1)
+        j = min(max(int(np.floor((o1 + d1 * t - origin[1]) / res)), 0), ny - 1)
+        k = min(max(int(np.floor((o2 + d2 * t - origin[2]) / res)), 0), nz - 1)
+        si = 1 if d0 > 0 else -1
+        sj = 1 if d1 > 0 else -1
+        sk = 1 if d2 > 0 else -1
+        tx, dtx, ty, dty, tz, dtz = big, big, big, big, big, big
+        if abs(d0) > 1e-12:
+            tx = (origin[0] + (i + (1 if si > 0 else 0)) * res - o0) / d0
+            dtx = res / abs(d0)
+        if abs(d1) > 1e-12:
+            ty = (origin[1] + (j + (1 if sj > 0 else 0)) * res - o1) / d1
+            dty = res / abs(d1)
+        if abs(d2) > 1e-12:
+            tz = (origin[2] + (k + (1 if sk > 0 else 0)) * res - o2) / d2
+            dtz = res / abs(d2)
+        t_enter = t0
+        while t_enter < t1:
+            if prob[i, j, k] >= p_block:
+                out[r] = t_enter
+                break
+            if tx <= ty and tx <= tz:
+                t_enter = tx
+                i += si
+                tx += dtx
+            elif ty <= tz:
+                t_enter = ty
+                j += sj
+                ty += dty
+            else:
+                t_enter = tz
+                k += sk
+                tz += dtz
+            if i < 0 or i >= nx or j < 0 or j >= ny or k < 0 or k >= nz:
+                break
 
 
 def first_blocked(grid: VoxelGrid, origins: Points3, directions: Points3, max_range: Array | float,
@@ -346,46 +394,84 @@ def trace(
     min_range: float,
     max_range: float,
     settings: TraceSettings = TraceSettings(),
-    bundle: int = 1,
+    beams_per_frame: int | None = None,
 ) -> np.ndarray:
     """Accumulators (n_groups, N_ACC) of the beams; ``group`` gives each beam's candidate.
 
-    Beams of one candidate must be contiguous. ``bundle`` is the number of neighbouring beams
-    that HRT treats as one bundle (when ``settings.hierarchy`` > 0).
+    Beams of one candidate must be contiguous, frame after frame with ``beams_per_frame``
+    beams each (HRT bundles span 2^a beams and 2^a frames; None: bundles of 4^a consecutive
+    beams).
     """
     grid.ensure_features()
+    grid.ensure_entropy()
     if grid.proximity is None:
         grid.ensure_proximity(settings.unknown_high)
     origins = np.ascontiguousarray(origins, dtype=np.float64)
     directions = np.ascontiguousarray(directions, dtype=np.float64)
     group = np.ascontiguousarray(group, dtype=np.int64)
-    if settings.hierarchy > 0 and len(origins):
-        keep = _hrt_mask(grid, origins, directions, max_range, settings, bundle)
-        origins, directions, group = origins[keep], directions[keep], group[keep]
     out = np.zeros((n_groups, N_ACC))
     if len(origins) == 0:
         return out
-    _trace_kernel(
-        grid.prob, grid.has_feature, grid.border, grid.density, grid.normal, grid.proximity,
-        np.asarray(grid.origin, dtype=np.float64), float(grid.resolution),
-        origins, directions, group, int(n_groups), float(min_range), float(max_range),
-        float(settings.p_stop), float(settings.unknown_low), float(settings.unknown_high),
-        float(np.cos(np.deg2rad(settings.incidence_deg))), float(settings.lam), bool(settings.visited), out,
+    if settings.hierarchy > 0:
+        tstart = hrt_start(grid, origins, directions, group, max_range, settings, beams_per_frame)
+    else:
+        tstart = np.zeros(len(origins))
+    args = (
+        grid.prob, grid.entropy, grid.has_feature, grid.border, grid.density, grid.normal, grid.proximity,
+        np.asarray(grid.origin, dtype=np.float64), float(grid.resolution), origins, directions, tstart, group,
     )
+    tail = (
+        float(min_range), float(max_range), float(settings.p_stop), float(settings.unknown_low),
+        float(settings.unknown_high), float(np.cos(np.deg2rad(settings.incidence_deg))), float(settings.lam),
+        bool(settings.visited), out,
+    )
+    workers = min(get_num_threads(), n_groups)
+    if workers <= 1:
+        stamp_t = np.zeros(grid.shape, dtype=np.int32)
+        stamp_f = np.zeros(grid.shape, dtype=np.int32)
+        _trace_range(*args, 0, len(origins), *tail, stamp_t, stamp_f)
+    else:
+        _trace_chunks(*args, _chunk_bounds(group, workers), *tail)
     return out
 
 
-def _hrt_mask(grid: VoxelGrid, origins: Points3, directions: Points3, max_range: float,
-              settings: TraceSettings, bundle: int) -> np.ndarray:
-    """Beams worth tracing finely: bundles whose central beam touches a non-free coarse voxel."""
-    k = max(1, 2**settings.hierarchy)
-    coarse = grid.coarse(settings.hierarchy)
+def _chunk_bounds(group: np.ndarray, workers: int) -> np.ndarray:
+    """Beam indices splitting the (contiguous) candidates into ``workers`` chunks of about equal size."""
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(group)) + 1, [len(group)]])
+    wanted = np.linspace(0, len(group), workers + 1)
+    cut = starts[np.searchsorted(starts, wanted[1:-1])]
+    return np.unique(np.concatenate([[0], cut, [len(group)]])).astype(np.int64)
+
+
+def hrt_start(grid: VoxelGrid, origins: Points3, directions: Points3, group: np.ndarray, max_range: float,
+              settings: TraceSettings, beams_per_frame: int | None = None) -> Array:
+    """Where each beam's fine traversal starts under HRT (inf: the beam's bundle is all free).
+
+    Vasquez-Gomez HRT with refinement on occupied *and* unknown coarse voxels: the central
+    beam of every 2^a x 2^a bundle is cast through the dilated coarse grid up to the first
+    voxel with p >= ``unknown_low``; the bundle's beams start one coarse voxel before it.
+    """
+    level = settings.hierarchy
+    k = 2**level
+    coarse = grid.coarse(level, dilate=True)
     n = len(origins)
-    size = max(1, k * bundle)
-    centres = np.minimum(np.arange(n) // size * size + size // 2, n - 1)
-    representatives = np.unique(centres)
-    blocked = first_blocked(coarse, origins[representatives], directions[representatives], max_range,
-                            p_block=settings.unknown_low)
-    interesting = np.zeros(n, dtype=bool)
-    interesting[representatives] = np.isfinite(blocked)
-    return interesting[centres]
+    index = np.arange(n)
+    first = np.zeros(n, dtype=np.int64)  # index of the first beam of each beam's candidate
+    change = np.flatnonzero(np.diff(group)) + 1
+    starts = np.concatenate([[0], change])
+    first[starts] = starts
+    first = np.maximum.accumulate(first)
+    local = index - first
+    if beams_per_frame:
+        frame, beam = local // beams_per_frame, local % beams_per_frame
+        block = (frame // k) * (beams_per_frame // k + 1) + beam // k
+    else:
+        block = local // (k * k)
+    key = group.astype(np.int64) * (int(local.max()) + 1) + block
+    order = np.argsort(key, kind="stable")
+    uniq, begin, counts = np.unique(key[order], return_index=True, return_counts=True)
+    representative = order[begin + counts // 2]
+    hit = first_blocked(coarse, origins[representative], directions[representative], max_range,
+                        p_block=settings.unknown_low)
+    start = np.where(np.isfinite(hit), np.maximum(hit - coarse.resolution, 0.0), np.inf)
+    return start[np.searchsorted(uniq, key)]

@@ -1,8 +1,10 @@
 """Behaviour plugins: one per step of the seeds' loops, thin adapters over the library.
 
-Each declares the blackboard keys it reads and writes (in the run's namespace). Steps that
-take long (scanning, integrating, planning, moving) are ``blocking``: they run in the run's
-worker thread while the tree keeps ticking.
+Each declares the blackboard keys it reads and writes (in the run's namespace) and calls
+one step of :class:`explore.modelling.ModellingSession`, which keeps the records, so a tree
+and ``ModellingSession.step()`` produce the same metrics. Steps that take long (scanning,
+integrating, registering, planning, moving) are ``blocking``: they run in the run's worker
+thread while the tree keeps ticking.
 """
 
 from __future__ import annotations
@@ -16,25 +18,29 @@ from explore.params import Param
 
 
 class StartModelling(ExploreBehaviour):
-    """Start single-object modelling: PVS, surface model and strategy over the world's region."""
+    """Start single-object modelling: PVS, surface model, strategy and motion planner over the world's region."""
 
     name = "start_modelling"
-    writes = ("modelling", "target", "done", "reason")
+    writes = ("modelling", "done", "reason")
+    blocking = True
     params = (
         Param("strategy", str, "ig_quality/bs_hr", "", "NBV strategy (overridden by --strategy)"),
         Param("resolution", float, 0.005, "m", "PVS voxel edge length", low=1e-4),
         Param("max_scans", int, 30, "", "scan budget (overridden by --max-scans)", low=1),
+        Param("noise", bool, True, "", "execute motions with the robot's positioning noise model"),
+        Param("max_plan_attempts", int, 10, "", "candidates tried per scan when planning the best fails", low=1),
+        Param("fallback", str, "sphere", "", "view generator tried when no candidate of the strategy can be "
+              "reached (robots with a limited workspace); empty = none"),
     )
 
     def work(self) -> Outcome:
         from explore.modelling import ModellingSession
+        from explore.run_outputs import ModellingOutputs
 
         ctx = self.context
         config = ctx.config
         strategy_name = config.strategy or self.p["strategy"]
-        strategy = ctx.registry.create(
-            "strategy", strategy_name, config.scoped("strategy"), "--strategy", "strategy"
-        )
+        strategy = ctx.registry.create("strategy", strategy_name, config.scoped("strategy"), "--strategy", "strategy")
         session = ModellingSession(
             ctx.sim,
             strategy,
@@ -42,34 +48,148 @@ class StartModelling(ExploreBehaviour):
             seed=config.seed,
             resolution=float(config.setting("resolution", self.p["resolution"])),
             max_scans=config.max_scans or self.p["max_scans"],
-            planner=config.planner,
+            planner=(config.planner, config.scoped("planner")),
+            noise=self.p["noise"],
+            max_plan_attempts=self.p["max_plan_attempts"],
+            fallback_generator=self.p["fallback"] or None,
         )
-        adapter = TreeModelling(session, strategy_name)
-        ctx.state["modelling"] = adapter
-        session = adapter
-        self.write("modelling", adapter)
-        self.write("target", session.initial_target())
+        ctx.state["modelling"] = ModellingOutputs(session, strategy_name, ctx)
+        self.write("modelling", session)
         self.write("done", False)
         self.write("reason", "")
-        ctx.trace("decision", what="strategy", strategy=strategy_name)
-        return success(f"strategy {strategy_name}")
+        ctx.trace("decision", what="strategy", strategy=strategy_name, planner=session.motion.planner_name)
+        return success(f"strategy {strategy_name}, planner {session.motion.planner_name}")
+
+
+class PlanMotion(ExploreBehaviour):
+    """Plan the scan: scan-path IK in 10 mm portions, the PVS along it (NBS rule), the approach motion.
+
+    With ``initial`` the random initial scan along a side or edge of the region (thesis
+    Sec. 4.7; the next side or edge if the robot cannot reach it). Otherwise the selected
+    candidate, and the next best ones if planning it fails; when none can be planned the
+    flag ``done`` is set with the reason and the behaviour fails.
+    """
+
+    name = "plan_motion"
+    reads = ("modelling", "candidate")
+    writes = ("plan", "done", "reason")
+    blocking = True
+    params = (Param("initial", bool, False, "", "plan the initial scan instead of the selected candidate"),)
+
+    def work(self) -> Outcome:
+        session = self.read("modelling")
+        before = len(session.motion.plans)
+        plan = session.plan_initial() if self.p["initial"] else session.plan_best(self.read("candidate"))
+        for record in session.motion.plans[before:]:
+            self.context.trace("decision", what="plan", source=record.source, verdict=record.verdict,
+                               seconds=record.seconds, planner=record.planner)
+        self.write("plan", plan)
+        if plan is None:
+            what = "initial scan" if self.p["initial"] else "candidate"
+            reason = f"no reachable {what} ({session.plan_failure})"
+            if self.p["initial"]:
+                session.finish("failed", reason)
+            else:
+                session.finish("stopped", reason)
+                self.write("done", True)
+                self.write("reason", reason)
+            return failure(reason)
+        return success(plan.reason)
+
+
+class ExecuteMotion(ExploreBehaviour):
+    """Execute the approach motion with the robot's positioning noise, checked against the true world."""
+
+    name = "execute_motion"
+    reads = ("modelling", "plan")
+    blocking = True
+
+    def work(self) -> Outcome:
+        session = self.read("modelling")
+        run = session.execute(self.read("plan"))
+        if run is None:
+            return success("placed at the scan start")
+        _trace_motion(self, session, run)
+        if session.status == "collided":
+            return failure(session.reason)
+        return success(f"{len(run.controls)} steps" + (", collided (continued)" if run.collided else ""))
 
 
 class AcquireScan(ExploreBehaviour):
-    """Take a scan at the current target (a view or a scan path) with the world's sensor."""
+    """Run the scan motion (a linear scan path, or none for a single view) and take the scan."""
 
     name = "acquire_scan"
-    reads = ("modelling", "target")
+    reads = ("modelling", "plan")
     writes = ("scan",)
     blocking = True
 
     def work(self) -> Outcome:
         session = self.read("modelling")
-        scan = session.acquire(self.read("target"))
+        motions = len(session.motion.motions)
+        scan, scan_length, _ = session.acquire(self.read("plan"))
+        if len(session.motion.motions) > motions:
+            _trace_motion(self, session, None)
+        if session.status == "collided":
+            return failure(session.reason)
         self.write("scan", scan)
         hits = int(scan.hits.sum())
-        self.context.trace("scan", index=session.n_scans + 1, beams=len(scan), returns=hits)
+        self.context.trace("scan", index=session.n_scans + 1, beams=len(scan), returns=hits, length_m=scan_length)
+        if self.context.rerun is not None:
+            self.context.rerun.step(session.n_scans + 1)
+            self.context.rerun.scan(scan)
         return success(f"{hits} returns")
+
+
+class RegisterScan(ExploreBehaviour):
+    """Local ICP of the new scan to the model before integration (Kriegel thesis Sec. 3.2.3).
+
+    Thesis values: correspondences within 3 mm, 2-3 iterations (running to convergence
+    shrank a model by ~4 mm), pairs with normals more than 60 deg apart rejected. A weak
+    or implausibly large correction is not applied.
+    """
+
+    name = "register_scan"
+    reads = ("modelling", "scan")
+    writes = ("scan",)
+    blocking = True
+    params = (
+        Param("enabled", bool, True, "", "register (false: pass the scan through unchanged)"),
+        Param("radius", float, 0.003, "m", "correspondence radius", low=1e-5),
+        Param("iterations", int, 3, "", "ICP iterations (thesis 2-3)", low=1),
+        Param("normal_gate_deg", float, 60.0, "deg", "reject pairs whose normals differ more", low=0.0, high=180.0),
+        Param("method", str, "point_to_point", "", "least-squares step (thesis: point to point)",
+              choices=("point_to_point", "point_to_plane")),
+        Param("min_fitness", float, 0.3, "", "apply only if this share of scan points found a partner", low=0.0,
+              high=1.0),
+        Param("max_shift", float, 0.01, "m", "apply only corrections that move the scan's centroid less", low=0.0),
+        Param("max_angle_deg", float, 3.0, "deg", "apply only corrections up to this rotation", low=0.0),
+    )
+
+    def work(self) -> Outcome:
+        if not self.p["enabled"]:
+            return success("disabled")
+        session = self.read("modelling")
+        registrar = self.context.registry.create(
+            "registrar", "icp",
+            {"radius": self.p["radius"], "iterations": self.p["iterations"],
+             "normal_gate_deg": self.p["normal_gate_deg"], "method": self.p["method"]},
+            "register_scan", "params",
+        )
+        scan = self.read("scan")
+        corrected, result = session.register(scan, registrar, self.p["min_fitness"], self.p["max_shift"],
+                                             self.p["max_angle_deg"])
+        if result is None:
+            return success("no model yet")
+        applied = corrected is not scan
+        points = scan.points()
+        centre = points.mean(axis=0)
+        transform = result.transformation
+        shift = float(np.linalg.norm(transform[:3, :3] @ centre + transform[:3, 3] - centre))
+        self.context.trace("registration", index=session.n_scans + 1, fitness=result.fitness, rmse=result.rmse,
+                           shift_m=shift, applied=applied)
+        self.write("scan", corrected)
+        return success(f"{'applied' if applied else 'rejected'}: shift {1000 * shift:.2f} mm, fitness "
+                       f"{result.fitness:.2f}")
 
 
 class IntegrateScan(ExploreBehaviour):
@@ -82,10 +202,18 @@ class IntegrateScan(ExploreBehaviour):
     def work(self) -> Outcome:
         session = self.read("modelling")
         stats = session.integrate(self.read("scan"))
-        record = session.session.records[-1] if session.session.records else None
-        line = session_status_line(session)
+        outputs = self.context.state.get("modelling")
+        if outputs is not None:
+            outputs.after_integration()
+        record = session.records[-1]
+        fields = {k: v for k, v in vars(record).items() if isinstance(v, int | float | str | np.floating)}
+        line = outputs.status_line() if outputs is not None else f"scans {session.n_scans}"
         self.context.status_line = line
-        self.context.trace("integrated", **({} if record is None else _record_fields(record)), stats=stats)
+        self.context.trace("integrated", **fields, stats=stats)
+        if self.context.rerun is not None:
+            mesh = session.surface.mesh
+            self.context.rerun.mesh(mesh.vertices, mesh.triangles)
+            self.context.rerun.voxels(session.pvs.occupied_points(), session.pvs.resolution)
         return success(line)
 
 
@@ -111,13 +239,18 @@ class SelectNBV(ExploreBehaviour):
 
     def work(self) -> Outcome:
         session = self.read("modelling")
-        candidate = session.select()
+        scored = list(session.stack)
+        candidate = session.select()  # scores every candidate of the stack in place
         self.write("candidate", candidate)
         if candidate is None:
+            session.finish("stopped", "no candidate left")
             self.write("done", True)
             self.write("reason", "no candidate left")
             self.context.trace("decision", what="select", result="none left")
             return success("no candidate left")
+        if self.context.rerun is not None:
+            poses = np.array([c.pose for c in scored])
+            self.context.rerun.candidates(poses[:, :3, 3], poses[:, :3, 2], np.array([c.score for c in scored]))
         self.context.trace("decision", what="select", score=float(candidate.score), source=candidate.source)
         return success(f"score {candidate.score:.4g}")
 
@@ -132,14 +265,14 @@ class CheckTermination(ExploreBehaviour):
     def work(self) -> Outcome:
         if self.read("done"):
             return success(self.read("reason") or "done")
-        decision = self.read("modelling").terminate()
-        action = getattr(decision, "action", "continue")
-        reason = getattr(decision, "reason", "")
-        self.context.trace("decision", what="termination", action=action, reason=reason)
-        if action == "stop":
+        session = self.read("modelling")
+        decision = session.terminate()
+        self.context.trace("decision", what="termination", action=decision.action, reason=decision.reason)
+        if decision.stop:
+            session.finish("stopped", decision.reason)
             self.write("done", True)
-            self.write("reason", reason)
-        return success(f"{action}: {reason}" if reason else action)
+            self.write("reason", decision.reason)
+        return success(f"{decision.action}: {decision.reason}" if decision.reason else decision.action)
 
 
 class CheckFlag(ExploreBehaviour):
@@ -163,190 +296,27 @@ class CheckFlag(ExploreBehaviour):
         return failure(f"{self.p['key']} is {value}")
 
 
-class PlanMotion(ExploreBehaviour):
-    """Plan a collision-free motion to the selected candidate (known environment + PVS)."""
-
-    name = "plan_motion"
-    reads = ("modelling", "candidate")
-    writes = ("plan",)
-    blocking = True
-
-    def work(self) -> Outcome:
-        session = self.read("modelling")
-        plan = session.plan(self.read("candidate"))
-        self.write("plan", plan)
-        if plan is None:
-            return failure("no collision-free motion to the candidate")
-        return success(f"{getattr(plan, 'length', 0.0):.3f} m")
-
-
-class ExecuteMotion(ExploreBehaviour):
-    """Execute the planned motion (with the robot's positioning noise); the next target results."""
-
-    name = "execute_motion"
-    reads = ("modelling", "plan", "candidate")
-    writes = ("target",)
-    blocking = True
-
-    def work(self) -> Outcome:
-        session = self.read("modelling")
-        target = session.execute(self.read("plan"), self.read("candidate"))
-        if target is None:
-            return failure("the motion ended in a collision")
-        self.write("target", target)
-        return success()
-
-
-def session_status_line(session: Any) -> str:
-    stats = session.live_stats() if hasattr(session, "live_stats") else {}
-    return "  ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in stats.items())
-
-
-def _record_fields(record: Any) -> dict[str, Any]:
-    fields = getattr(record, "__dict__", {})
-    return {k: v for k, v in fields.items() if isinstance(v, int | float | str | bool | np.floating | np.integer)}
-
-
-class TreeModelling:
-    """The modelling session driven step by step by a tree (records what ``step()`` records)."""
-
-    def __init__(self, session: Any, strategy: str) -> None:
-        self.session = session
-        self.strategy = strategy
-        self._pending: dict[str, Any] = {"source": "initial", "info": {}, "score": float("nan")}
-        self._selection_s = 0.0
-        self._candidates = 0
-        self._decision = ("continue", "")
-        self._path_length = 0.0
-
-    @property
-    def n_scans(self) -> int:
-        return self.session.n_scans
-
-    def initial_target(self) -> Any:
-        return self.session.initial_target()
-
-    def acquire(self, target: Any) -> Any:
-        import time
-
-        self._t0 = time.perf_counter()
-        scan, scan_length, travel = self.session.acquire(target)
-        self._scan_length, self._travel = scan_length, travel
-        return scan
-
-    def integrate(self, scan: Any) -> dict[str, Any]:
-        import time
-
-        from explore.modelling import ScanRecord
-
-        out = self.session.integrate(scan)
-        s = self.session
-        s.records.append(
-            ScanRecord(
-                index=s.n_scans, source=self._pending["source"], info=dict(self._pending["info"]),
-                scan_length_m=self._scan_length, travel_m=self._travel, selection_s=self._selection_s,
-                candidates=self._candidates, coverage_estimate=s.ctx.coverage_history[-1],
-                coverage_border=float(s.surface.coverage_border()), density=s.ctx.density_history[-1],
-                unknown_voxels=s.ctx.unknown_history[-1], decision=self._decision[0], reason=self._decision[1],
-                score=self._pending["score"], step_s=time.perf_counter() - getattr(self, "_t0", time.perf_counter()),
-            )
-        )
-        return {"integrate_s": out.get("integrate_s", 0.0)}
-
-    def generate(self) -> int:
-        count = self.session.generate()
-        self._candidates = len(self.session.stack)
-        return count
-
-    def select(self) -> Any:
-        candidate = self.session.select()
-        self._selection_s = self.session.selection_times[-1] if candidate is not None else 0.0
-        if candidate is not None:
-            self._pending = {"source": candidate.source, "info": candidate.info, "score": candidate.score}
-        return candidate
-
-    def terminate(self) -> Any:
-        decision = self.session.terminate()
-        self._decision = (decision.action, decision.reason)
-        if decision.stop:
-            self.session.status, self.session.reason = "stopped", decision.reason
-        return decision
-
-    def plan(self, candidate: Any) -> Any:
-        """Free flyer: a straight line to the candidate's start (others: reachability by IK)."""
-        from explore.scan import ScanPath
-
-        start = candidate.target.start if isinstance(candidate.target, ScanPath) else candidate.target
-        robot = self.session.robot
-        if robot is not None and robot.name != "free_flyer" and robot.ik(start) is None:
-            return None
-        here = self.session.ctx.sensor_pose
-        length = 0.0 if here is None else float(np.linalg.norm(start[:3, 3] - here[:3, 3]))
-        return _Plan(length)
-
-    def execute(self, plan: Any, candidate: Any) -> Any:
-        return candidate.target
-
-    def live_stats(self) -> dict[str, Any]:
-        s = self.session
-        stats: dict[str, Any] = {"strategy": self.strategy, "scans": s.n_scans}
-        if s.records:
-            stats["ĉ_m"] = float(s.records[-1].coverage_estimate)
-            stats["candidates"] = int(self._candidates)
-        return stats
-
-    def run_outputs(self, out_dir: Any) -> dict[str, Any]:
-        """Meshes, PVS, pictures and the modelling metrics for metrics.json."""
-        from pathlib import Path
-
-        from explore.pictures import save_curves_png
-
-        out_dir = Path(out_dir)
-        s = self.session
-        metrics = s.metrics()
-        s.surface.save_ply(out_dir / "model.ply")
-        s.surface.save_png(out_dir / "model.png", f"{s.sim.spec.name}: {s.n_scans} scans")
-        s.pvs.save(out_dir / "pvs.npz")
-        coverage = list(metrics.get("coverage") or [])
-        estimate = list(metrics.get("coverage_estimate") or [])
-        x = np.arange(1, len(estimate) + 1)
-        curves = {"ĉ_m (estimate)": (x, np.asarray(estimate))}
-        if coverage:
-            curves["c_a (ground truth)"] = (x[: len(coverage)], np.asarray(coverage))
-        save_curves_png(curves, out_dir / "coverage.png", "scans", "coverage", self.strategy)
-        selection = list(metrics.get("selection_s") or [])
-        return {
-            "strategy": self.strategy,
-            "scans": s.n_scans,
-            "coverage": coverage[-1] if coverage else None,
-            "coverage_per_scan": coverage,
-            "coverage_estimate": estimate[-1] if estimate else None,
-            "coverage_estimate_per_scan": estimate,
-            "density_per_scan": metrics.get("density"),
-            "path_length_m": metrics.get("travel_m"),
-            "scan_path_m": metrics.get("scan_path_m"),
-            "selection_s_mean": float(np.mean(selection)) if selection else None,
-            "selection_s_per_scan": selection,
-            "n_s": metrics.get("n_s"),
-            "stop_reason": metrics.get("stop_reason"),
-            "objects": [{"name": b.name, "result": "modelled", "coverage": coverage[-1] if coverage else None}
-                        for b in s.sim.objects()],
-        }
-
-
-class _Plan:
-    def __init__(self, length: float) -> None:
-        self.length = length
+def _trace_motion(behaviour: ExploreBehaviour, session: Any, run: Any) -> None:
+    """Trace the last executed motion (and log the sensor path to Rerun)."""
+    record = session.motion.motions[-1]
+    behaviour.context.trace("motion", index=session.n_scans + 1, kind=record.kind, steps=record.steps,
+                            duration_s=record.duration_s, sensor_path_m=record.sensor_path_m,
+                            collided=record.collided, bodies=list(record.bodies))
+    if behaviour.context.rerun is not None and run is not None:
+        robot = session.robot
+        behaviour.context.rerun.trajectory(np.array([robot.fk(q)[:3, 3] for q in run.configs[::5]]))
+        behaviour.context.rerun.sensor_pose(run.sensor_pose)
 
 
 PLUGINS = [
     StartModelling,
+    PlanMotion,
+    ExecuteMotion,
     AcquireScan,
+    RegisterScan,
     IntegrateScan,
     GenerateCandidates,
     SelectNBV,
     CheckTermination,
     CheckFlag,
-    PlanMotion,
-    ExecuteMotion,
 ]

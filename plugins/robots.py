@@ -76,6 +76,22 @@ def _quat(m: Array) -> list[float]:
     return q
 
 
+def _rotvec(m: Array) -> Array:
+    """Rotation vector of a rotation matrix: atan2 form of the log map (stable at small angles).
+
+    Same values as ``Rotation.from_matrix(m).as_rotvec()`` without its per-call overhead,
+    which dominated IK (7 calls per Jacobian); angles near pi fall back to scipy.
+    """
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    sin2 = math.sqrt(float(w @ w))  # 2 sin(angle)
+    cos = 0.5 * (m[0, 0] + m[1, 1] + m[2, 2] - 1.0)
+    if cos < -0.99:
+        return Rotation.from_matrix(m).as_rotvec()
+    if sin2 < 1e-12:
+        return 0.5 * w
+    return w * (math.atan2(0.5 * sin2, cos) / sin2)
+
+
 def pose_error(a: Pose, b: Pose) -> tuple[float, float]:
     """Position (m) and rotation angle (rad) between two poses."""
     r = a[:3, :3].T @ b[:3, :3]
@@ -555,7 +571,7 @@ class _ArmChain:
         return self.refine(world_T_flange, q, iterations)
 
     def _twist_error(self, target: Pose, pose: Pose) -> Array:
-        rot = Rotation.from_matrix(target[:3, :3] @ pose[:3, :3].T).as_rotvec()
+        rot = _rotvec(target[:3, :3] @ pose[:3, :3].T)
         return np.concatenate([target[:3, 3] - pose[:3, 3], rot])
 
     def refine(self, target: Pose, q: Array, iterations: int = 60, damping: float = 1e-3) -> Array:
@@ -575,7 +591,7 @@ class _ArmChain:
                     np.concatenate(
                         [
                             pose_i[:3, 3] - pose[:3, 3],
-                            Rotation.from_matrix(pose_i[:3, :3] @ pose[:3, :3].T).as_rotvec(),
+                            _rotvec(pose_i[:3, :3] @ pose[:3, :3].T),
                         ]
                     )
                     / h

@@ -15,6 +15,7 @@ import numpy as np
 from explore.candidates import Candidate, PlanningContext, collision_free_share
 from explore.params import Param
 from explore.scan import ScanPath
+from explore.typed import Points3
 from explore.visibility import (
     ACC_NAMES,
     ENTROPY,
@@ -38,7 +39,8 @@ RAY_PARAMS = (
     Param("beam_stride", int, 4, "", "use every n-th beam of a stripe / pixel (thesis: every 4th)", low=1),
     Param("frame_spacing", float, 0.006, "m", "distance between simulated stripes along a path", low=1e-4),
     Param("visited", bool, True, "", "count each voxel once per candidate (thesis visited marking)"),
-    Param("hierarchy", int, 0, "", "hierarchical ray tracing level a (0 = uniform; Vasquez-Gomez HRT)",
+    Param("hierarchy", int, 0, "",
+          "hierarchical ray tracing level a (0 = uniform; Vasquez-Gomez HRT: 2^a x 2^a bundles, coarse pass first)",
           low=0, high=4),
 )
 
@@ -58,17 +60,31 @@ class Utility:
         raise NotImplementedError
 
 
+def candidate_beams(sensor: Any, cand: Candidate, beam_stride: int, frame_spacing: float) -> tuple[Points3, Points3]:
+    """Origins and directions of one candidate's simulated beams, cached on the candidate.
+
+    Candidates are immutable once generated and persistent ones (the sphere) are scored in
+    every iteration, so the beams are computed once per (stride, spacing).
+    """
+    key = (beam_stride, frame_spacing)
+    cached = cand.beams_cache
+    if cached is not None and cached[0] == key:
+        return cached[1], cached[2]
+    stride = 1
+    if isinstance(cand.target, ScanPath):
+        per_frame = cand.target.speed / max(sensor.rate_hz, 1e-9)
+        stride = max(1, int(round(frame_spacing / max(per_frame, 1e-9))))
+    o, d, _ = sensor.beams(cand.target, beam_stride=beam_stride, frame_stride=stride)
+    cand.beams_cache = (key, o, d)
+    return o, d
+
+
 def beams_of(ctx: PlanningContext, candidates: list[Candidate], beam_stride: int,
              frame_spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Origins, directions and candidate index of the simulated beams of every candidate."""
-    sensor = ctx.sensor
     origins, dirs, groups = [], [], []
     for index, cand in enumerate(candidates):
-        stride = 1
-        if isinstance(cand.target, ScanPath):
-            per_frame = cand.target.speed / max(sensor.rate_hz, 1e-9)
-            stride = max(1, int(round(frame_spacing / max(per_frame, 1e-9))))
-        o, d, _ = sensor.beams(cand.target, beam_stride=beam_stride, frame_stride=stride)
+        o, d = candidate_beams(ctx.sensor, cand, beam_stride, frame_spacing)
         origins.append(o)
         dirs.append(d)
         groups.append(np.full(len(o), index, dtype=np.int64))
@@ -92,9 +108,9 @@ class RayUtility(Utility):
         origins, dirs, groups = beams_of(ctx, candidates, self.beam_stride, self.frame_spacing)
         sensor = ctx.sensor
         min_range = 0.0 if getattr(sensor, "clear_from_origin", True) else sensor.min_range
-        bundle = 1
+        per_frame = len(sensor.local_directions()[:: self.beam_stride])
         acc = trace(ctx.grid, origins, dirs, groups, len(candidates), min_range, sensor.max_range,
-                    self.settings(), bundle)
+                    self.settings(), per_frame)
         for cand, row in zip(candidates, acc, strict=True):
             cand.diagnostics.update({name: float(v) for name, v in zip(ACC_NAMES, row, strict=True)})
         return acc
@@ -159,7 +175,17 @@ class InformationGain(RayUtility):
 
 
 class IGQuality(RayUtility):
-    """IG/quality f = (1 - w) e_v + w (1 - q_s), w = n/(n + 5) (thesis Eq. 4.30-4.34; 'need' variant default)."""
+    """IG/quality f = (1 - w) e_v + w (1 - q_s), w = n/(n + 5) (thesis Eq. 4.30-4.34).
+
+    ``variant``: ``need`` (default) scores λ b_i + (1 − λ)(1 − d̄_i), i.e. rewards seeing voxels
+    with border edges and low density, as the thesis text intends; ``kriegel_literal`` is
+    Eq. 4.33/4.30 as printed, ω (1 − Σ(λ b_i + (1 − λ) d̄_i)/N_v), which penalises views of
+    border voxels. ``normalise``: ``max`` (default) divides each term by its maximum over
+    the candidates; ``n_v`` divides both by N_v as Eq. 4.32/4.34. On the bunny the entropy
+    sum spreads 300-600 times more across candidates than the quality sum, so with ``n_v``
+    ω cannot balance the two and IG/Quality acts as IG. Measurements of both options:
+    docs/results.md (Kriegel thesis Table 4.5).
+    """
 
     name = "ig_quality"
     params = RAY_PARAMS + (

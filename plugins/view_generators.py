@@ -17,9 +17,11 @@ from explore.candidates import (
     PlanningContext,
     RepairSettings,
     any_sweep,
+    clip_above,
     frame_from,
     make_target,
     repair,
+    segments_hit_boxes,
 )
 from explore.geometry import fibonacci_sphere
 from explore.params import Param
@@ -126,6 +128,9 @@ class Sphere(ViewGenerator):
                 target: Any = ScanPath(start, end, speed)
             else:
                 target = pose
+            target = clip_above(target, ctx.lowest_sensor_z)  # objects cannot be viewed from below
+            if target is None:
+                continue
             out.append(Candidate(target, self.name, {"kind": "sphere", "index": index}, None, ctx.iteration))
         return out
 
@@ -163,6 +168,9 @@ class RandomViews(ViewGenerator):
                 start[:3, 3] -= half
                 end[:3, 3] += half
                 target = ScanPath(start, end, speed)
+            target = clip_above(target, ctx.lowest_sensor_z)
+            if target is None:
+                continue
             out.append(Candidate(target, self.name, {"kind": "random"}, None, ctx.iteration))
         return out
 
@@ -425,53 +433,106 @@ class HoleRescan(ViewGenerator):
         Param("h_min", int, 5, "", "smallest hole in border edges [UNSPEC]", low=3),
         Param("h_max", int, 300, "", "largest hole in border edges (excludes the bottom opening) [UNSPEC]", low=3),
         Param("directions", int, 200, "", "directions sampled for the occlusion-free normal (Alg. 2)", low=8),
+        Param("p_block", float, 0.75, "", "voxels from this occupancy on occlude a direction (Alg. 2); "
+              "0.75 = the thesis' occupied class, so thin surfaces not yet at 0.95 still occlude",
+              low=0.5, high=1.0),
         Param("pick", float, 0.2, "", "lower_bound(front + pick (back - front)) of the free directions",
               low=0.0, high=1.0),
         Param("extend", float, 1.1, "", "path ends at c_h -/+ extend * d_h (Eq. 4.22-4.23)", low=0.1),
         Param("merge_distance", float, 0.02, "m", "merge holes with centres this close ...", low=0.0),
         Param("merge_angle_deg", float, 30.0, "deg", "... and normals within this angle", low=0.0),
-        Param("floor_margin", float, 0.012, "m", "ignore holes touching the region floor (the support)", low=0.0),
+        Param("contact_band", float, 0.006, "m",
+              "skip holes lying entirely this close to the support (its contact footprint, unobservable); "
+              "holes that touch the support and rise above it are scanned", low=0.0),
         Param("standoff", float, 0.0, "m", "sensor distance d_s; 0 = the sensor's optimal distance", low=0.0),
         Param("min_path", float, 0.03, "m", "shortest scan path", low=0.0),
         Param("repair", bool, True, "", "occlusion/collision repair (Algorithm 3)"),
+        Param("max_directions", int, 8, "",
+              "free directions of Algorithm 2 tried in turn when Algorithm 3 cannot repair the first "
+              "(1 = the thesis' single direction)", low=1),
+        Param("same_rim", float, 0.8, "",
+              "a hole counts as already scanned when this share of its rim lies on the rim of a scanned "
+              "hole (it did not change since); a hole the scan shrank is a new hole", low=0.0, high=1.0),
+        Param("rim_tolerance", float, 0.004, "m", "rim vertices this close count as the same rim", low=0.0),
+        Param("max_rescans", int, 3, "", "scans of one unchanged hole, each from a new direction (thesis: 1)",
+              low=1),
+        Param("rescan_angle_deg", float, 45.0, "deg",
+              "a further scan of an unchanged hole must view it this differently from the earlier ones", low=0.0),
     )
 
     def reset(self) -> None:
-        self.scanned: list[tuple[Array, Array]] = []  # (centre, normal) of holes already selected
+        self.scanned: list[tuple[Array, Array, Points3, Array]] = []  # centre, normal, rim, view direction
+        self._rims: dict[tuple[int, int], Points3] = {}  # (iteration, id) -> rim of the offered holes
 
     def remember(self, candidate: Candidate) -> None:
-        """Called when a hole candidate is selected: each real hole is scanned once."""
-        if "centre" in candidate.info:
-            self.scanned.append((np.asarray(candidate.info["centre"]), np.asarray(candidate.info["normal"])))
+        """Called when a hole candidate is selected: the hole is not scanned again from there (Sec. 4.4)."""
+        rim = self._rims.get((candidate.created, candidate.info.get("id", -1)))
+        if rim is not None:
+            info = candidate.info
+            view = -np.asarray(candidate.pose)[:3, 2]
+            self.scanned.append((np.asarray(info["centre"]), np.asarray(info["normal"]), rim, view))
+
+    def used_directions(self, centre: Array, normal: Array, rim: Points3) -> Points3:
+        """Directions (towards the sensor) this hole was scanned from before, (k, 3).
+
+        The same hole = similar centre and normal and (``same_rim``) the same rim; a hole whose
+        rim changed (the last scans closed part of it) is a new hole.
+        """
+        from scipy.spatial import cKDTree
+
+        used = []
+        for c, n, old_rim, view in self.scanned:
+            if not self._similar(centre, normal, c, n):
+                continue
+            dist, _ = cKDTree(old_rim).query(rim, distance_upper_bound=self.rim_tolerance)
+            if np.mean(np.isfinite(dist)) >= self.same_rim:
+                used.append(view)
+        return np.asarray(used).reshape(-1, 3)
 
     def _similar(self, c1: Array, n1: Array, c2: Array, n2: Array) -> bool:
         return bool(np.linalg.norm(c1 - c2) <= self.merge_distance
                     and np.dot(n1, n2) >= np.cos(np.deg2rad(self.merge_angle_deg)))
 
-    def free_direction(self, ctx: PlanningContext, centre: Array, normal: Array, standoff: float) -> Array | None:
-        """Algorithm 2: the occlusion-free direction at 20 % between the closest and farthest to n_h."""
+    def free_directions(self, ctx: PlanningContext, centre: Array, normal: Array, standoff: float) -> Points3:
+        """Algorithm 2: occlusion-free view directions of a hole, best first.
+
+        Of the ``directions`` samples, those whose ray from c_h out to d_s meets no occupied
+        voxel (and no known environment box, and whose viewpoint is not below the support)
+        are sorted by d_n = ‖n_h − ñ‖; the first returned is the thesis' choice
+        lower_bound(front + 0.2 (back − front)), then the following ones in map order, then
+        the ones before it (closest to n_h last), so a caller can fall back to the next free
+        direction when Algorithm 3 cannot repair the first. Empty if the hole has no valid view.
+        """
         dirs = fibonacci_sphere(self.directions)
         start = centre + 1.5 * ctx.grid.resolution * dirs
-        t = first_blocked(ctx.grid, start, dirs, standoff, p_block=0.95)
+        t = first_blocked(ctx.grid, start, dirs, standoff, p_block=self.p_block)
         free = ~np.isfinite(t)
         eyes = centre + standoff * dirs
         free &= ~_env_blocked(ctx, eyes)
-        free &= eyes[:, 2] > ctx.region_min[2] - 0.02  # objects cannot be viewed from below
+        free &= ~segments_hit_boxes(start, eyes, ctx.environment_boxes)  # the known environment occludes too
+        free &= eyes[:, 2] >= ctx.lowest_sensor_z  # objects cannot be viewed from below (Sec. 4.1)
         if not free.any():
-            return None
-        key = np.linalg.norm(normal - dirs[free], axis=1)
+            return np.zeros((0, 3))
+        candidates = dirs[free]
+        key = np.linalg.norm(normal - candidates, axis=1)
         order = np.argsort(key, kind="stable")
         front, back = key[order[0]], key[order[-1]]
-        bound = front + self.pick * (back - front)
-        chosen = order[np.searchsorted(key[order], bound)]
-        return dirs[free][chosen]
+        first = int(np.searchsorted(key[order], front + self.pick * (back - front)))
+        first = min(first, len(order) - 1)
+        ranked = np.concatenate([order[first:], order[:first][::-1]])
+        return candidates[ranked]
+
+    def free_direction(self, ctx: PlanningContext, centre: Array, normal: Array, standoff: float) -> Array | None:
+        """The thesis' single choice of Algorithm 2 (None if the hole has no valid view)."""
+        found = self.free_directions(ctx, centre, normal, standoff)
+        return found[0] if len(found) else None
 
     def generate(self, ctx: PlanningContext) -> list[Candidate]:
         surface = ctx.surface
         holes = surface.holes(min_edges=self.h_min, max_edges=self.h_max)
         vertices = surface.mesh.vertices
-        floor = ctx.region_min[2] + self.floor_margin
-        kept = [h for h in holes if vertices[h.loop, 2].min() > floor]
+        band = ctx.region_min[2] + self.contact_band
+        kept = [h for h in holes if vertices[h.loop, 2].max() > band]
         # merge holes with similar centre and orientation
         groups: list[list[Any]] = []
         for hole in kept:
@@ -487,38 +548,61 @@ class HoleRescan(ViewGenerator):
             loop_pts = np.vstack([vertices[h.loop] for h in group])
             centre = loop_pts.mean(axis=0)
             normal = group[0].normal / np.linalg.norm(group[0].normal)
-            if any(self._similar(centre, normal, c, n) for c, n in self.scanned):
+            used = self.used_directions(centre, normal, loop_pts)
+            if len(used) >= self.max_rescans:
                 continue
-            n_h = self.free_direction(ctx, centre, normal, standoff)
-            if n_h is None:
-                continue
-            far = loop_pts[np.argmax(np.linalg.norm(loop_pts - centre, axis=1))]
-            d_h = far - centre  # hole-radius length [INTERP]
-            d_h -= np.dot(d_h, n_h) * n_h
-            if np.linalg.norm(d_h) < 1e-6:
-                d_h = any_sweep(-n_h) * 0.01
-            half = max(self.extend * np.linalg.norm(d_h), 0.5 * self.min_path)
-            sweep = d_h / np.linalg.norm(d_h)
-            pose = frame_from(-n_h, sweep, centre + standoff * n_h)
-            if pose is None:
-                continue
-            if ctx.sensor.geometry == "line":
-                start, end = pose.copy(), pose.copy()
-                start[:3, 3] = centre - half * pose[:3, 1] + standoff * n_h  # Eq. 4.22
-                end[:3, 3] = centre + half * pose[:3, 1] + standoff * n_h  # Eq. 4.23
-                target: Any = ScanPath(start, end, getattr(ctx.sensor, "speed", 0.05))
-            else:
-                target = pose
             info = {"kind": "hole", "id": number, "centre": centre.tolist(), "normal": normal.tolist(),
                     "holes": len(group), "edges": int(sum(h.size for h in group))}
-            cand = Candidate(target, self.name, info, loop_pts[:: max(1, len(loop_pts) // 12)], ctx.iteration)
-            if self.repair:
-                extent = np.vstack([centre - half * pose[:3, 1], centre + half * pose[:3, 1]])
-                cand = repair(cand, ctx, centre, standoff, extent, RepairSettings())
-                if cand is None:
-                    continue
-            out.append(cand)
+            self._rims[(ctx.iteration, number)] = loop_pts
+            tried = 0
+            anchor = centre
+            directions = self.free_directions(ctx, centre, normal, standoff)
+            if len(directions) == 0:
+                ring = loop_pts[:: max(1, len(loop_pts) // 8)]
+                for point in centre + 0.5 * (ring - centre):
+                    directions = self.free_directions(ctx, point, normal, standoff)
+                    if len(directions):
+                        anchor = point
+                        break
+            for n_h in directions:
+                if tried >= self.max_directions:
+                    break
+                if len(used) and np.max(used @ n_h) > np.cos(np.deg2rad(self.rescan_angle_deg)):
+                    continue  # scanned from about here already
+                tried += 1
+                cand = self._candidate(ctx, anchor, loop_pts, n_h, standoff, info)
+                if cand is not None:
+                    out.append(cand)
+                    break
         return out
+
+    def _candidate(self, ctx: PlanningContext, centre: Array, loop_pts: Points3, n_h: Array, standoff: float,
+                   info: dict[str, Any]) -> Candidate | None:
+        """The hole scan viewed along -n_h: path per Eq. 4.22-4.23, repaired by Algorithm 3."""
+        far = loop_pts[np.argmax(np.linalg.norm(loop_pts - centre, axis=1))]
+        d_h = far - centre  # hole-radius length [INTERP]
+        d_h -= np.dot(d_h, n_h) * n_h
+        if np.linalg.norm(d_h) < 1e-6:
+            d_h = any_sweep(-n_h) * 0.01
+        half = max(self.extend * np.linalg.norm(d_h), 0.5 * self.min_path)
+        sweep = d_h / np.linalg.norm(d_h)
+        pose = frame_from(-n_h, sweep, centre + standoff * n_h)
+        if pose is None:
+            return None
+        if ctx.sensor.geometry == "line":
+            start, end = pose.copy(), pose.copy()
+            start[:3, 3] = centre - half * pose[:3, 1] + standoff * n_h  # Eq. 4.22
+            end[:3, 3] = centre + half * pose[:3, 1] + standoff * n_h  # Eq. 4.23
+            target: Any = ScanPath(start, end, getattr(ctx.sensor, "speed", 0.05))
+        else:
+            target = pose
+        # Alg. 3 occlusion test for holes: surface points along d_h, across the middle of the hole
+        focus = centre + np.linspace(-0.5, 0.5, 9)[:, None] * d_h[None, :]
+        cand = Candidate(target, self.name, dict(info), focus, ctx.iteration)
+        if not self.repair:
+            return cand
+        extent = np.vstack([centre - half * pose[:3, 1], centre + half * pose[:3, 1]])
+        return repair(cand, ctx, centre, standoff, extent, RepairSettings())
 
 
 class BoundaryHole(ViewGenerator):

@@ -1,8 +1,10 @@
-"""Tree files: validation (one clear line), includes and cycles, decorators, failure reasons."""
+"""Tree files: validation (one clear line), includes and cycles, decorators, failure reasons;
+the CLI's exit codes for bad input; the worker that keeps long steps off the tick."""
 
 from __future__ import annotations
 
 import json
+import threading
 
 import pytest
 
@@ -44,11 +46,28 @@ class Fail(ExploreBehaviour):
         return failure(self.p["reason"])
 
 
+GATES: dict[str, threading.Event] = {}
+
+
+class Wait(ExploreBehaviour):
+    """Test behaviour: a long step in the worker that ends when its gate opens (or after 30 s)."""
+
+    name = "test_wait"
+    blocking = True
+    params = (Param("gate", str, "a", "", "name of the gate in GATES"),)
+
+    def work(self):
+        if GATES[self.p["gate"]].wait(timeout=30.0):
+            return success("gate opened")
+        return failure("gate never opened")
+
+
 class _TestPlugins:
     @hookimpl
     def explore_register_plugins(self, register) -> None:
         register(Count)
         register(Fail)
+        register(Wait)
 
 
 @pytest.fixture(scope="module")
@@ -168,3 +187,143 @@ def test_unknown_set_key_is_bad_input(tmp_path, reg) -> None:
         execute(RunConfig(tree=str(path), world="bunny_pedestal", settings={"bogus.key": 1}, out=tmp_path / "r"), reg)
     config = RunConfig(tree=str(path), world="bunny_pedestal", settings={"test_count.until": 2}, out=tmp_path / "r2")
     assert execute(config, reg).reason == "done after 2 iterations"
+
+
+def test_a_long_step_does_not_block_the_tick(tmp_path, reg) -> None:
+    """The gate opens only from the tick callback: a step that blocked the tick would never end."""
+    GATES["a"] = threading.Event()
+    path = _write(tmp_path, "wait.yaml", "root: {behaviour: test_wait, params: {gate: a}}\n")
+    ticks_while_running = []
+
+    def on_tick(root, context) -> None:
+        if root.status.value == "RUNNING":
+            ticks_while_running.append(1)
+            if len(ticks_while_running) >= 3:
+                GATES["a"].set()
+
+    result = execute(RunConfig(tree=str(path), world="bunny_pedestal", out=tmp_path / "run"), reg, on_tick)
+    assert result.status == "success" and result.reason == "gate opened"
+    assert len(ticks_while_running) >= 3
+
+
+def test_a_timed_out_step_does_not_hold_up_the_next(tmp_path, reg) -> None:
+    """The timed-out step keeps waiting in its thread; the fallback's step runs in a fresh one."""
+    GATES["stuck"], GATES["free"] = threading.Event(), threading.Event()
+    GATES["free"].set()
+    text = """
+root:
+  selector: Try
+  memory: true
+  children:
+    - timeout: Limit
+      seconds: 0.2
+      child: {behaviour: test_wait, name: Stuck, params: {gate: stuck}}
+    - behaviour: test_wait
+      name: Fallback
+      params: {gate: free}
+"""
+    path = _write(tmp_path, "timeout.yaml", text)
+    try:
+        result = execute(RunConfig(tree=str(path), world="bunny_pedestal", out=tmp_path / "run"), reg)
+    finally:
+        GATES["stuck"].set()  # let the abandoned step end
+    assert result.status == "success"
+    events = [json.loads(line) for line in (tmp_path / "run" / "trace.jsonl").read_text().splitlines()]
+    assert any(e["event"] == "abandoned" and e["node"] == "Stuck" for e in events)
+    assert any(e["event"] == "status" and e["node"] == "Fallback" and e["status"] == "SUCCESS" for e in events)
+
+
+def test_a_failure_before_the_first_scan_still_writes_metrics(tmp_path, reg) -> None:
+    """Modelling started, then a step failed: no mesh to write, but metrics.json with the reason."""
+    text = """
+root:
+  sequence: Mission
+  children:
+    - behaviour: start_modelling
+    - behaviour: test_fail
+      name: Calibrate
+      params: {reason: no calibration target}
+"""
+    path = _write(tmp_path, "early.yaml", text)
+    result = execute(RunConfig(tree=str(path), world="bunny_pedestal", out=tmp_path / "run"), reg)
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert result.status == "failure" and metrics["reason"] == "Calibrate: no calibration target"
+    assert metrics["scans"] == 0 and metrics["files"]["mesh"] is None and "output_errors" not in metrics
+    assert not (tmp_path / "run" / "model.ply").exists() and (tmp_path / "run" / "pvs.npz").exists()
+
+
+# -- the command line: bad input is one line on stderr and exit code 2 ---------------------------
+
+
+def _cli(args: list[str], capsys) -> tuple[int, list[str]]:
+    from explore_cli.main import main
+
+    code = main(args)
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    return code, err
+
+
+CLI_BAD_TREES = [
+    ("root: {behaviour: scna}\n", "root.behaviour: unknown behaviour 'scna' (valid: "),
+    ("root: {behaviour: register_scan, params: {radius: -3 mm}}\n", "root.params.radius: "),
+    ("root: {behaviour: plan_motion, params: {initail: true}}\n", "root.params.initail: unknown parameter"),
+    ("root: {include: b.yaml}\n", "include cycle: a.yaml -> b.yaml -> a.yaml"),
+    ("root: [oops\n", "malformed YAML"),
+]
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+@pytest.mark.parametrize(("text", "message"), CLI_BAD_TREES)
+def test_cli_rejects_a_bad_tree_with_exit_2(tmp_path, capsys, command, text, message) -> None:
+    _write(tmp_path, "a.yaml", text)
+    _write(tmp_path, "b.yaml", "root: {include: a.yaml}\n")
+    out = tmp_path / "run"
+    args = ["tree", "validate", str(tmp_path / "a.yaml")] if command == "validate" else [
+        "run", str(tmp_path / "a.yaml"), "--world", "bunny_pedestal", "--out", str(out), "-q"]
+    code, err = _cli(args, capsys)
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("error: ") and message in err[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--planner", "rrt_conect"], "--planner: motion_planner: unknown motion_planner 'rrt_conect' (valid: "),
+        (["--robot", "tank"], "--robot: robot: unknown robot 'tank' (valid: "),
+        (["--sensor", "sonar"], "--sensor: sensor: unknown sensor 'sonar' (valid: "),
+        (["--strategy", "ig/bogus"], "--strategy: strategy: unknown strategy 'ig/bogus' (valid: "),
+        (["--set", "planner.time_limit=-1"], "--set: planner.time_limit: "),
+        (["--set", "register_scan.iterations=0"], "--set: register_scan.iterations: "),
+        (["--set", "tau=0.002"], "--set: tau: unknown setting"),
+        (["--world", "atlantis"], "atlantis"),
+        (["--rerun", "out.txt"], "--rerun: expected a .rrd file path"),
+    ],
+)
+def test_cli_rejects_bad_names_before_creating_the_run(tmp_path, capsys, option, message) -> None:
+    out = tmp_path / "run"
+    world = [] if option[0] == "--world" else ["--world", "bunny_pedestal"]
+    code, err = _cli(["run", "model_object", *world, *option, "--out", str(out), "-q"], capsys)
+    assert code == 2
+    assert len(err) == 1 and message in err[0]
+    assert not out.exists()
+
+
+def test_bad_input_never_touches_an_existing_folder(tmp_path, capsys) -> None:
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    code, _ = _cli(["run", "model_object", "--world", "bunny_pedestal", "--planner", "nope", "--out", str(out)],
+                   capsys)
+    assert code == 2 and sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    assert (out / "notes.txt").read_text() == "keep me"
+
+
+def test_tree_picture_labels_are_plain_text(tmp_path, registry) -> None:
+    """py_trees' Unicode symbols (missing glyphs in Graphviz fonts) become words."""
+    from explore.run_outputs import tree_dot
+
+    root = build(load_tree("model_object", registry).root, registry)
+    labels = [n.get("label") for n in tree_dot(root).get_nodes() if n.get("label")]
+    assert '"Model object\\n(memory)"' in labels
+    assert all(ch.isascii() for label in labels for ch in label)

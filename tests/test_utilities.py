@@ -97,7 +97,8 @@ def test_hierarchical_tracing_skips_only_free_bundles() -> None:
     )
     dirs = np.tile([1.0, 0.0, 0.0], (64, 1))
     fine = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0)[0]
-    coarse = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1), bundle=1)[0]
+    coarse = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1),
+                   beams_per_frame=8)[0]
     assert coarse[UNKNOWN] == pytest.approx(fine[UNKNOWN])
     free = VoxelGrid(np.full((16, 16, 16), 0.02, dtype=np.float32), np.zeros(3), RES)
     skipped = trace(free, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1))[0]
@@ -233,5 +234,17 @@ def test_isler_family(registry) -> None:  # noqa: ANN001
     prox = registry.create("utility", "proximity_count").score(cands, ctx)
     # w = exp(-distance to the occupied voxel / 1 cm): 3, 2, 1 voxels away, times P_v
     assert prox[0] == pytest.approx(np.exp(-3) + 0.5 * np.exp(-2) + 0.25 * np.exp(-1), rel=1e-4)
-    rnd = registry.create("utility", "random").score(cands, ctx)
-    assert rnd.shape == (2,)
+
+
+def test_random_utility_is_uniform_and_seeded(registry) -> None:  # noqa: ANN001
+    ctx = utility_ctx(two_rows())
+    cands = [beam_candidate(0.005 + 0.001 * i) for i in range(4)]
+    util = registry.create("utility", "random")
+    ctx.rng = np.random.default_rng(7)
+    draws = np.array([util.score(cands, ctx) for _ in range(400)])
+    assert draws.shape == (400, 4) and draws.min() >= 0.0 and draws.max() < 1.0
+    assert draws.mean() == pytest.approx(0.5, abs=0.03)  # uniform on [0, 1): mean 1/2, sd of the mean 0.007
+    picks = np.bincount(np.argmax(draws, axis=1), minlength=4)
+    assert np.all((picks > 70) & (picks < 130))  # each candidate chosen about 100 times (binomial sd 8.7)
+    ctx.rng = np.random.default_rng(7)
+    assert np.array_equal(util.score(cands, ctx), draws[0])  # the session's seed decides

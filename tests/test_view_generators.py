@@ -5,7 +5,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.candidates import CandidateStack, PlanningContext, frame_from, rotation
+from explore.candidates import (
+    BETAS_DEG,
+    Candidate,
+    CandidateStack,
+    PlanningContext,
+    RepairSettings,
+    above_support,
+    clip_above,
+    frame_from,
+    make_target,
+    repair,
+    rotation,
+    segments_hit_boxes,
+)
 from explore.meshes import TriMesh
 from explore.scan import ScanPath
 from explore.surface import border_edges, boundary_loops, holes_of, vertex_normals_of
@@ -139,7 +152,8 @@ def test_boundary_trend_without_corner_looks_perpendicular(registry, striper) ->
 def test_hole_rescan_finds_the_punched_hole(registry, striper) -> None:  # noqa: ANN001
     surface = MeshSurface(grid_mesh(punch=True))
     ctx = context(surface, striper)
-    gen = registry.create("view_generator", "hole", {"repair": False, "floor_margin": 0.0, "pick": 0.0, "h_max": 40})
+    gen = registry.create("view_generator", "hole",
+                          {"repair": False, "contact_band": 0.0, "pick": 0.0, "h_max": 40, "max_rescans": 1})
     cands = gen.generate(ctx)
     assert len(cands) == 1
     cand = cands[0]
@@ -151,7 +165,84 @@ def test_hole_rescan_finds_the_punched_hole(registry, striper) -> None:  # noqa:
     radius = np.sqrt(2) * 1.5 * 0.0035
     assert cand.target.length == pytest.approx(max(2.2 * radius, 0.03), rel=0.05)
     gen.remember(cand)
-    assert gen.generate(ctx) == []  # each real hole is scanned once
+    assert gen.generate(ctx) == []  # max_rescans = 1: each real hole is scanned once (thesis)
+
+
+def test_unchanged_hole_is_rescanned_only_from_new_directions(registry, striper) -> None:  # noqa: ANN001
+    ctx = context(MeshSurface(grid_mesh(punch=True)), striper)
+    gen = registry.create("view_generator", "hole", {"repair": False, "contact_band": 0.0, "h_max": 40,
+                                                     "max_rescans": 3, "rescan_angle_deg": 45.0})
+    views = []
+    for _ in range(4):
+        cands = gen.generate(ctx)
+        if not cands:
+            break
+        views.append(-cands[0].pose[:3, 2])
+        gen.remember(cands[0])
+    assert len(views) == 3  # then the unchanged hole is exhausted
+    for a in range(3):
+        for b in range(a):
+            assert np.degrees(np.arccos(np.clip(views[a] @ views[b], -1, 1))) > 45.0
+    # a hole whose rim changed (the scans closed part of it) is a new hole
+    moved = grid_mesh(punch=True)
+    moved.vertices[:, 0] += 0.01
+    ctx.surface = MeshSurface(moved)
+    assert len(gen.generate(ctx)) == 1
+
+
+def test_hole_in_the_support_contact_band_is_skipped(registry, striper) -> None:  # noqa: ANN001
+    flat = MeshSurface(grid_mesh(punch=True, z=0.503))  # a hole 3 mm above the support: its contact footprint
+    ctx = context(flat, striper)
+    gen = registry.create("view_generator", "hole", {"repair": False, "h_max": 40, "contact_band": 0.006})
+    assert gen.generate(ctx) == []
+    raised = grid_mesh(punch=True, z=0.503)
+    raised.vertices[:, 2] += 0.3 * (raised.vertices[:, 0] - raised.vertices[:, 0].min())  # rises above the band
+    ctx.surface = MeshSurface(raised)
+    cands = gen.generate(ctx)
+    assert len(cands) == 1
+    assert all(p[2] >= ctx.lowest_sensor_z for p in (cands[0].target.start[:3, 3], cands[0].target.end[:3, 3]))
+
+
+def test_boundary_hole_switches_when_coverage_stalls(registry, striper) -> None:  # noqa: ANN001
+    ctx = context(MeshSurface(grid_mesh(punch=True)), striper)
+    gen = registry.create("view_generator", "boundary_hole", {"repair": False, "contact_band": 0.0, "h_max": 40,
+                                                              "min_scans": 3, "switch_delta": 0.01})
+    ctx.iteration, ctx.coverage_history = 3, [0.40, 0.55, 0.62]  # grows by 7 %: keep searching boundaries
+    assert not gen.should_switch(ctx)
+    boundary = gen.generate(ctx)
+    assert boundary and all(c.source == "boundary" for c in boundary) and ctx.mode == "boundary"
+    ctx.stack.push(boundary)
+    ctx.iteration, ctx.coverage_history = 4, [0.40, 0.55, 0.62, 0.625]  # Eq. 4.38: 0.5 % < 1 %
+    assert gen.should_switch(ctx)
+    cands = gen.generate(ctx)
+    assert ctx.mode == "hole" and gen.switched_at == 4
+    assert not any(c.source == "boundary" for c in ctx.stack)  # the remaining boundary candidates are dropped
+    assert [c.source for c in cands].count("hole") == 1
+    ctx.coverage_history.append(0.70)  # once switched, it stays in hole mode
+    assert gen.should_switch(ctx)
+
+
+def test_random_view_generator(registry, striper) -> None:  # noqa: ANN001
+    ctx = context(MeshSurface(grid_mesh()), striper)
+    gen = registry.create("view_generator", "random", {"count": 30, "min_elevation_deg": -10.0})
+    cands = gen.generate(ctx)
+    assert len(cands) == 30
+    radius = striper.optimal_distance + 0.25 * 0.26
+    centre = ctx.region_centre
+    for cand in cands:
+        mid = cand.pose[:3, 3]
+        assert np.linalg.norm(mid - centre) == pytest.approx(radius, abs=0.16)  # path of 30 cm through the view
+        to_centre = (centre - mid) / np.linalg.norm(centre - mid)
+        assert cand.pose[:3, 2] @ to_centre > 0.8  # looks at the region
+        assert cand.target.length <= 0.3 + 1e-9
+        assert min(cand.target.start[2, 3], cand.target.end[2, 3]) >= ctx.lowest_sensor_z - 1e-9
+    elevation = [np.degrees(np.arcsin(-c.pose[2, 2])) for c in cands]
+    assert max(elevation) - min(elevation) > 30.0  # spread over the sphere
+    again = registry.create("view_generator", "random", {"count": 30, "min_elevation_deg": -10.0})
+    ctx.rng = np.random.default_rng(0)
+    first = [c.pose[:3, 3] for c in again.generate(ctx)]
+    ctx.rng = np.random.default_rng(0)
+    assert np.allclose(first, [c.pose[:3, 3] for c in again.generate(ctx)])  # the session's rng decides
 
 
 def test_sphere_generator_sizes(registry, striper) -> None:  # noqa: ANN001
@@ -159,7 +250,11 @@ def test_sphere_generator_sizes(registry, striper) -> None:  # noqa: ANN001
     gen = registry.create("view_generator", "sphere")
     cands = gen.generate(ctx)
     assert len(cands) == 81
-    assert all(c.target.length == pytest.approx(0.3) for c in cands)
+    # 30 cm paths, the lowest ones cut where they would go below the support (thesis Sec. 4.1)
+    lengths = np.array([c.target.length for c in cands])
+    assert np.all(lengths <= 0.3 + 1e-9) and np.mean(lengths > 0.3 - 1e-9) > 0.6
+    low = [min(c.target.start[2, 3], c.target.end[2, 3]) for c in cands]
+    assert min(low) == pytest.approx(ctx.lowest_sensor_z)
     assert gen.generate(ctx) == []  # the search space is fixed before the first scan
     camera = registry.create("sensor", "depth_camera")
     ctx.sensor = camera
@@ -171,3 +266,69 @@ def test_rotation_matches_rodrigues() -> None:
     r = rotation(np.array([0.0, 0.0, 1.0]), np.pi / 2)
     assert r @ np.array([1.0, 0, 0]) == pytest.approx([0, 1, 0])
     assert np.linalg.det(r) == pytest.approx(1.0)
+
+
+def repair_setup(striper, bar_half_width: float):  # noqa: ANN001, ANN201
+    """Free space over a focus patch at z = 0.6 with an occupied bar (along y) 5 cm above it."""
+    ctx = context(MeshSurface(grid_mesh()), striper)
+    ctx.grid.prob[:] = 0.02
+    res, origin = ctx.grid.resolution, ctx.grid.origin
+    lo = np.floor((np.array([-bar_half_width, -0.1, 0.65]) - origin) / res + 1e-9).astype(int)
+    hi = np.floor((np.array([bar_half_width, 0.1, 0.66]) - origin) / res + 1e-9).astype(int)
+    ctx.grid.prob[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = 0.98
+    focus = np.array([[x, y, 0.6] for x in (-0.01, 0.0, 0.01) for y in (-0.02, 0.0, 0.02)])
+    anchor = np.array([0.0, 0.0, 0.6])
+    pose = frame_from(np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), anchor + np.array([0, 0, 0.325]))
+    cand = Candidate(make_target(striper, pose, focus, 0.325), "boundary", {"id": 0}, focus, 1)
+    return ctx, cand, anchor, focus
+
+
+def test_repair_rotates_around_an_occluder_in_10_degree_steps(striper) -> None:  # noqa: ANN001
+    assert BETAS_DEG == (0, 10, -10, 20, -20, 30, -30, 40, -40)  # Algorithm 3: smallest first, + before -
+    ctx, cand, anchor, focus = repair_setup(striper, 0.0)  # no bar: the candidate itself is fine
+    assert repair(cand, ctx, anchor, 0.325, focus) is cand
+    # a 6 cm wide bar 5 cm above the patch: the points x = -1, 0, 1 cm are seen past it only when the
+    # view is tilted about s_y by atan(4 cm / 5 cm) = 39 deg or more, i.e. by 40 deg (30 deg: 1 of 3)
+    ctx, cand, anchor, focus = repair_setup(striper, 0.03)
+    fixed = repair(cand, ctx, anchor, 0.325, focus)
+    assert fixed is not None and fixed.info["repaired_deg"] == (0, 40)
+    view = fixed.pose[:3, 2]
+    assert np.degrees(np.arccos(-view[2])) == pytest.approx(40.0, abs=0.5)
+    # the path still passes over the anchor at the stand-off distance (Eq. 4.18)
+    mid = fixed.pose[:3, 3]
+    assert np.linalg.norm(np.cross(anchor - mid, view)) == pytest.approx(0.0, abs=0.02)
+    # a bar too wide for +-40 deg: the candidate is removed
+    ctx, cand, anchor, focus = repair_setup(striper, 0.09)
+    assert repair(cand, ctx, anchor, 0.325, focus) is None
+    # stricter acceptance: 100 % un-occluded points needed; 40 deg still sees all of them
+    strict = RepairSettings(min_visible=1.0)
+    ctx, cand, anchor, focus = repair_setup(striper, 0.03)
+    assert repair(cand, ctx, anchor, 0.325, focus, strict).info["repaired_deg"] == (0, 40)
+
+
+def test_repair_never_takes_the_sensor_below_the_support(striper) -> None:  # noqa: ANN001
+    ctx, _, anchor, focus = repair_setup(striper, 0.0)
+    up = frame_from(np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), anchor - np.array([0, 0, 0.325]))
+    below = Candidate(make_target(striper, up, focus, 0.325), "boundary", {"id": 0}, focus, 1)
+    assert not above_support(below.target, ctx.lowest_sensor_z)
+    assert repair(below, ctx, anchor, 0.325, focus) is None  # +-40 deg cannot lift it above the support
+
+
+def test_clip_above_and_segments_through_boxes() -> None:
+    pose = frame_from(np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0]), np.array([-0.3, 0.0, 0.5]))
+    path = make_target_path(pose, 0.3)
+    clipped = clip_above(path, 0.45)
+    assert clipped.start[2, 3] == pytest.approx(0.45) and clipped.end[2, 3] == pytest.approx(0.65)
+    assert clip_above(path, 0.7) is None and clip_above(path, 0.3) is path
+    assert clip_above(path, 0.63, min_length=0.03) is None  # 2 cm left: too short
+    box = [(np.array([-0.05, -0.05, 0.0]), np.array([0.05, 0.05, 0.5]))]
+    starts = np.array([[0.0, 0, 0.6], [0.0, 0, 0.6], [0.2, 0, 0.4], [0.2, 0, 0.4], [0.2, 0, 0.6]])
+    ends = np.array([[0.0, 0, 0.55], [0.0, 0, 0.4], [-0.2, 0, 0.4], [0.1, 0, 0.4], [-0.2, 0, 0.6]])
+    assert segments_hit_boxes(starts, ends, box).tolist() == [False, True, True, False, False]
+
+
+def make_target_path(pose: np.ndarray, length: float) -> ScanPath:
+    start, end = pose.copy(), pose.copy()
+    start[:3, 3] -= 0.5 * length * pose[:3, 1]
+    end[:3, 3] += 0.5 * length * pose[:3, 1]
+    return ScanPath(start, end)
