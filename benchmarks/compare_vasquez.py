@@ -1,16 +1,20 @@
 """Vasquez-Gomez et al. Table 5: deterministic (DU) vs expected utility (EU) under positioning noise.
 
-Runs ``explore compare`` with the ``vasquez/*`` strategies that are registered (``vasquez/du``;
-``vasquez/eu`` when present) on a mobile manipulator whose velocity controls carry the paper's
-truncated Gaussian noise (sigma_v 1.65 mm/s, sigma_omega 0.28 rad/s: the robot's defaults).
-summary.md then holds the Table 5 layout (mean / max coverage, collision rate).
+Runs ``explore compare`` with the view/state tree ``trees/nbvs_mobile.yaml`` and the
+``vasquez/du`` and ``vasquez/eu`` strategies on the bunny among furniture (``cluttered``, a
+mobile manipulator whose velocity controls carry the paper's truncated Gaussian noise,
+sigma_v 1.65 mm/s, sigma_omega 0.28 rad/s: the robot's defaults). A collision ends a run (a
+failed mission in the report), as in the paper. summary.md then holds coverage and
+failures per strategy; ``benchmarks/planners.py --part nbvs`` prints the Table 5 layout
+(collision rate per k) from the same library code without the tree.
 
-Quick (default): bunny pedestal, 3 seeds, 8 scans. ``--full``: bunny, teddy and duck
-pedestals, 10 seeds (as in the paper), 15 scans. Extra arguments after ``--`` go to
-``explore compare``; re-running the same command resumes::
+Quick (default): 3 seeds, 6 views. ``--full``: 10 seeds (as in the paper), 12 views. EU uses
+the strategy's k = 100 (``--strategies`` lists the strategies; ``benchmarks/planners.py
+--part nbvs --ks 1,100,500`` sweeps k). Extra arguments after ``--`` go to ``explore
+compare``; re-running the same command resumes::
 
     .venv/bin/python benchmarks/compare_vasquez.py --out runs/vasquez_quick
-    .venv/bin/python benchmarks/compare_vasquez.py --full -- --set robot.sigma_v=0.00165
+    .venv/bin/python benchmarks/compare_vasquez.py --full
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-ROBOT = "mobile_manipulator"
+WORLD = "cluttered"
 
 
 def strategies() -> list[str]:
@@ -32,7 +36,7 @@ def strategies() -> list[str]:
 def arguments(argv: list[str] | None = None) -> list[str]:
     """The ``explore compare`` arguments of the chosen grid."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--full", action="store_true", help="3 worlds, 10 seeds, 15 scans")
+    parser.add_argument("--full", action="store_true", help="10 seeds, 12 views")
     parser.add_argument("--seeds", type=int, help="override the number of seeds")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--executor", default="local")
@@ -40,12 +44,11 @@ def arguments(argv: list[str] | None = None) -> list[str]:
     parser.add_argument("--out", default=None)
     parser.add_argument("--dry-run", action="store_true", help="only print the command")
     args, extra = parser.parse_known_args(argv)
-    worlds = "bunny_pedestal,teddy_pedestal,duck_pedestal" if args.full else "bunny_pedestal"
     command = [
-        "compare", "--tree", "model_object", "--worlds", worlds, "--strategies", ",".join(strategies()),
-        "--robots", ROBOT, "--seeds", str(args.seeds or (10 if args.full else 3)),
-        "--max-scans", "15" if args.full else "8", "--jobs", str(args.jobs), "--executor", args.executor,
-        "--timeout", "3600", "--out", args.out or f"runs/compare_vasquez_{'full' if args.full else 'quick'}",
+        "compare", "--tree", "nbvs_mobile", "--worlds", WORLD, "--strategies", ",".join(strategies()),
+        "--seeds", str(args.seeds or (10 if args.full else 3)), "--max-scans", "12" if args.full else "6",
+        "--jobs", str(args.jobs), "--executor", args.executor, "--timeout", "7200",
+        "--out", args.out or f"runs/compare_vasquez_{'full' if args.full else 'quick'}",
     ]
     if args.ray_address:
         command += ["--ray-address", args.ray_address]

@@ -7,9 +7,13 @@
   environment (``sim.environment_ids()``) and, optionally, a ``space_free(points) -> bool``
   callable (the PVS distance field: everything not confidently free, p >= 0.05, is an
   obstacle; Kriegel thesis Sec. 3.2.2) evaluated on points sampled on the robot's links.
-* :func:`plan` wraps every OMPL geometric planner by name; :func:`plan_kinodynamic` plans
-  base motions with ``ompl.control`` (unicycle or omnidirectional model) and returns per-step
-  velocity controls; :func:`validate_path` re-checks a path densely.
+* :func:`plan` wraps every OMPL geometric planner the installed bindings offer, by name, within
+  its time limit (search, re-check and retry included); a differential base is checked as it
+  drives (turn-drive-turn). :func:`plan_kinodynamic` (``ompl.control``, unicycle or
+  omnidirectional model) and :func:`plan_mobile` (geometric base path) move a mobile robot:
+  arm to its travel configuration, base, arm to the goal, with per-step velocity controls;
+  :class:`PlanarChecker` tests base poses of the rigid robot fast; :func:`validate_path`
+  re-checks a path densely.
 * :func:`linear_scan_path_ik` validates a linear Cartesian scan path in 10 mm portions with
   IK and continuity (Kriegel thesis Sec. 2 motion planning); :func:`classify_blocked`
   applies the NBS rule (through occupied -> discard, through unknown -> keep for later).
@@ -45,7 +49,6 @@ GEOMETRIC_PLANNERS: dict[str, str] = {
     "informed_rrt_star": "InformedRRTstar",
     "prm": "PRM",
     "prm_star": "PRMstar",
-    "lazy_prm": "LazyPRM",
     "kpiece": "KPIECE1",
     "bkpiece": "BKPIECE1",
     "lbkpiece": "LBKPIECE1",
@@ -55,8 +58,9 @@ GEOMETRIC_PLANNERS: dict[str, str] = {
     "aorrtc": "AORRTC",
     "sorrt_star": "SORRTstar",
 }
-# ompl 2.0.1's Python wheel lacks LazyPRM; use PRM until the bindings have it
-LAZY_FALLBACK: dict[str, str] = {"LazyPRM": "PRM", "LazyPRMstar": "PRMstar"}
+# Planners of OMPL's C++ library that a Python wheel may lack (ompl 2.0.1 binds neither):
+# they are offered only when ``ompl.geometric`` has the class, never replaced by another one.
+OPTIONAL_GEOMETRIC: dict[str, str] = {"lazy_prm": "LazyPRM", "lazy_prm_star": "LazyPRMstar"}
 CONTROL_PLANNERS: dict[str, str] = {"rrt": "RRT", "kpiece": "KPIECE1", "sst": "SST", "est": "EST", "pdst": "PDST"}
 
 
@@ -72,10 +76,12 @@ def truncated_normal(rng: np.random.Generator, sigma: Array, size: int, beta: fl
     return out
 
 
-def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0) -> float:
+def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0,
+                            active: np.ndarray | None = None) -> float:
     """Sum of log densities of the truncated normal errors (log of Eq. 2 / Eq. 3 products).
 
-    Dimensions with sigma = 0 (noise-free) contribute nothing.
+    Dimensions with sigma = 0 (noise-free) contribute nothing, nor do the entries that
+    ``active`` (same shape as ``eps``) marks as not sampled (a control that commands no motion).
     """
     sigma = np.asarray(sigma, dtype=float)
     use = sigma > 0
@@ -84,6 +90,8 @@ def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0) ->
     e, s = np.asarray(eps)[:, use], sigma[use]
     mass = math.erf(beta / math.sqrt(2.0))  # P(-beta sigma <= e <= beta sigma) = 0.997 for beta 3
     logpdf = -0.5 * (e / s) ** 2 - np.log(s * math.sqrt(2.0 * math.pi)) - math.log(mass)
+    if active is not None:
+        logpdf = np.where(np.asarray(active, dtype=bool)[:, use], logpdf, 0.0)
     return float(logpdf.sum())
 
 
@@ -178,6 +186,8 @@ class BulletCollider:
         # integer indices of the parts (a frozen dataclass hashes slowly in the inner loop)
         index = {part: i for i, part in enumerate(self.parts)}
         self._pair_index = [(index.get(a, -1), index.get(b, -1)) for a, b in self.self_pairs]
+        self._pair_a = np.array([i for i, _ in self._pair_index], dtype=np.int64)
+        self._pair_b = np.array([j for _, j in self._pair_index], dtype=np.int64)
         self._ignore_index = {(index[part], body) for part, body in self.ignore if part in index}
 
     def obstacle_aabbs(self, bodies: Sequence[int]) -> list[tuple[int, tuple, tuple]]:
@@ -193,29 +203,35 @@ class BulletCollider:
     def collides(self, obstacles: Sequence[int], margin: float = 0.0, self_check: bool = True) -> list[int]:
         """Obstacle body ids (and -1 for self-collision) within ``margin`` of the robot.
 
-        Plain-Python AABB overlap tests (numpy calls on 3-vectors cost more than the test)
+        AABB overlap tests (one numpy comparison of every part box with every obstacle box)
         prune both the obstacle and the self-collision pairs before ``getClosestPoints``.
         """
         p, c = self.p, self.client
         hits: list[int] = []
         boxes = self.obstacle_aabbs(obstacles)
-        ignore = self._ignore_index
-        part_boxes: list[tuple] = []
-        for i, part in enumerate(self.parts):
-            lo, hi = p.getAABB(part.body, part.link, physicsClientId=c)
-            part_boxes.append((lo, hi))
-            for body, blo, bhi in boxes:
-                if body in hits or (ignore and (i, body) in ignore):
+        part_boxes = np.array([[*lo, *hi] for lo, hi in (p.getAABB(part.body, part.link, physicsClientId=c)
+                                                         for part in self.parts)]).reshape(-1, 6)
+        if boxes:
+            ids = [body for body, _, _ in boxes]
+            obstacle_boxes = np.array([[*lo, *hi] for _, lo, hi in boxes])
+            near = np.all(part_boxes[:, None, :3] - margin <= obstacle_boxes[None, :, 3:], axis=2) & \
+                np.all(part_boxes[:, None, 3:] + margin >= obstacle_boxes[None, :, :3], axis=2)
+            for i, j in zip(*np.nonzero(near), strict=True):
+                body = ids[j]
+                if body in hits or (self._ignore_index and (int(i), body) in self._ignore_index):
                     continue
-                if not _overlap(lo, hi, blo, bhi, margin):
-                    continue
+                part = self.parts[i]
                 points = p.getClosestPoints(part.body, body, margin, linkIndexA=part.link, physicsClientId=c)
                 if points and min(pt[8] for pt in points) < margin:
                     hits.append(body)
-        if self_check:
-            for (a, b), (ia, ib) in zip(self.self_pairs, self._pair_index, strict=True):
-                if ia >= 0 and ib >= 0 and not _overlap(*part_boxes[ia], *part_boxes[ib], 0.0):
-                    continue  # disjoint boxes cannot penetrate
+        if self_check and self.self_pairs:
+            ia, ib = self._pair_a, self._pair_b
+            known = (ia >= 0) & (ib >= 0)
+            a_box, b_box = part_boxes[np.where(known, ia, 0)], part_boxes[np.where(known, ib, 0)]
+            touching = ~known | (np.all(a_box[:, :3] <= b_box[:, 3:], axis=1) & np.all(a_box[:, 3:] >= b_box[:, :3],
+                                                                                     axis=1))
+            for index in np.flatnonzero(touching):  # disjoint boxes cannot penetrate
+                a, b = self.self_pairs[index]
                 points = p.getClosestPoints(
                     a.body, b.body, 0.0, linkIndexA=a.link, linkIndexB=b.link, physicsClientId=c
                 )
@@ -223,15 +239,6 @@ class BulletCollider:
                     hits.append(-1)
                     break
         return hits
-
-
-def _overlap(lo: Sequence[float], hi: Sequence[float], blo: Sequence[float], bhi: Sequence[float],
-             margin: float) -> bool:
-    """True if box [lo, hi] grown by ``margin`` overlaps box [blo, bhi]."""
-    return not (
-        lo[0] - margin > bhi[0] or lo[1] - margin > bhi[1] or lo[2] - margin > bhi[2]
-        or hi[0] + margin < blo[0] or hi[1] + margin < blo[1] or hi[2] + margin < blo[2]
-    )
 
 
 def self_collision_pairs(
@@ -261,6 +268,8 @@ class MotionProblem:
     A configuration is valid if it is within the joint limits, the robot is at least
     ``margin`` away from every known environment body, does not collide with itself, and
     (with ``space_free``) every point sampled on its links is free in the PVS.
+    ``space_bounds`` (lo, hi): ``space_free`` calls everything outside this box free, so only
+    the robot parts near it are sampled (derived automatically for ``pvs.is_free``).
     """
 
     def __init__(
@@ -269,20 +278,52 @@ class MotionProblem:
         space_free: SpaceFree | None = None,
         margin: float | None = None,
         resolution: float = 0.01,
+        space_bounds: tuple[Array, Array] | None = None,
     ) -> None:
         self.robot = robot
         self.space_free = space_free
         self.margin = float(getattr(robot, "clearance", 0.0) if margin is None else margin)
         self.resolution = float(resolution)  # max configuration step (L2) between checks
         self.checks = 0
+        self.space_bounds = space_bounds if space_bounds is not None else _free_outside_box(space_free)
+        self.pins: dict[int, float] = {}
+        self.motions: dict[tuple, np.ndarray] = {}  # joint motions found (see cache_key)
 
     @property
     def lower(self) -> Array:
-        return np.asarray(self.robot.lower, dtype=float)
+        lower = np.asarray(self.robot.lower, dtype=float).copy()
+        for index, value in self.pins.items():
+            lower[index] = value
+        return lower
 
     @property
     def upper(self) -> Array:
-        return np.asarray(self.robot.upper, dtype=float)
+        upper = np.asarray(self.robot.upper, dtype=float).copy()
+        for index, value in self.pins.items():
+            upper[index] = value
+        return upper
+
+    def cache_key(self, a: Array, b: Array) -> tuple | None:
+        """Key of a motion a -> b valid while the free space does not change (None: no caching).
+
+        Without ``space_free`` the known environment is static; ``pvs.is_free`` carries the
+        PVS version; any other free-space test cannot be cached.
+        """
+        if self.space_free is None:
+            version: Any = "static"
+        else:
+            version = getattr(getattr(self.space_free, "__self__", None), "version", None)
+            if version is None:
+                return None
+        return (np.asarray(a, dtype=float).tobytes(), np.asarray(b, dtype=float).tobytes(), version,
+                tuple(sorted(self.pins.items())))
+
+    def pinned(self, dofs: Sequence[int], q: Array) -> MotionProblem:
+        """The same problem with the joints ``dofs`` held at their values in ``q`` (e.g. the base)."""
+        out = MotionProblem(self.robot, self.space_free, self.margin, self.resolution, self.space_bounds)
+        out.pins = {**self.pins, **{int(i): float(q[i]) for i in dofs}}
+        out.motions = self.motions
+        return out
 
     def is_valid(self, q: Array, margin: float | None = None) -> bool:
         """Validity of one configuration (limits, known environment, self, free space)."""
@@ -294,14 +335,34 @@ class MotionProblem:
         if robot.in_collision(q, world="known", margin=self.margin if margin is None else margin):
             return False
         if self.space_free is not None:
-            points = robot.link_points(q)
+            if self.space_bounds is None:
+                points = robot.link_points(q)
+            else:  # only parts near the box whose outside ``space_free`` calls free
+                points = robot.link_points(q, within=self.space_bounds)
             if len(points) and not bool(np.all(self.space_free(points))):
                 return False
         return True
 
     def is_valid_motion(self, a: Array, b: Array, resolution: float | None = None) -> bool:
-        """Straight-line motion from ``a`` to ``b`` checked every ``resolution`` (L2)."""
-        return path_is_valid(self, np.vstack([a, b]), resolution, margin=0.0)
+        """The motion from ``a`` to ``b`` as the robot executes it, checked every ``resolution`` (L2).
+
+        A straight line in configuration space, except for a differential base, which turns,
+        drives and turns (``robot.execution_path``).
+        """
+        return path_is_valid(self, self.motion_path(np.vstack([a, b])), resolution, margin=0.0)
+
+    def motion_path(self, path: np.ndarray) -> np.ndarray:
+        """The piecewise-linear path the robot really follows for ``path`` (see ``execution_path``)."""
+        expand = getattr(self.robot, "execution_path", None)
+        return np.asarray(path, dtype=float) if expand is None else np.asarray(expand(path), dtype=float)
+
+
+def _free_outside_box(space_free: SpaceFree | None) -> tuple[Array, Array] | None:
+    """The grid box of ``pvs.is_free`` (which calls every point outside its grid free), else None."""
+    owner = getattr(space_free, "__self__", None)
+    if getattr(space_free, "__name__", "") == "is_free" and hasattr(owner, "min_corner"):
+        return np.asarray(owner.min_corner, dtype=float), np.asarray(owner.max_corner, dtype=float)
+    return None
 
 
 def _interpolate(path: np.ndarray, resolution: float) -> np.ndarray:
@@ -321,6 +382,8 @@ def validate_path(
     """Dense re-check; the index (into the interpolated path) of the first invalid state, or None.
 
     The default ``margin`` of 0 checks true contact, while planning uses the robot's clearance.
+    The path is checked as given (use ``problem.motion_path`` for what a differential base
+    really drives).
     """
     dense = _interpolate(path, resolution or problem.resolution)
     for index, q in enumerate(dense):
@@ -329,15 +392,10 @@ def validate_path(
     return None
 
 
-def path_is_valid(
-    problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
-) -> bool:
-    """Same test as ``validate_path(...) is None`` but in bisection order (van der Corput, as
-    OMPL's DiscreteMotionValidator): an invalid path is usually rejected after a few checks."""
-    dense = _interpolate(path, resolution or problem.resolution)
-    n = len(dense)
+def _bisection_order(n: int) -> list[int]:
+    """Indices 0..n-1, ends first, then midpoints (van der Corput, as OMPL's DiscreteMotionValidator)."""
     if n == 0:
-        return True
+        return []
     order = [0, n - 1] if n > 1 else [0]
     seen = set(order)
     step = n - 1
@@ -349,7 +407,35 @@ def path_is_valid(
                 order.append(index)
         step = half
     order.extend(i for i in builtins_range(n) if i not in seen)
-    return all(problem.is_valid(dense[i], margin=margin) for i in order)
+    return order
+
+
+def path_is_valid(
+    problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
+) -> bool:
+    """Same test as ``validate_path(...) is None`` but in bisection order: an invalid path is
+    usually rejected after a few checks."""
+    return bool(check_path_until(problem, path, None, resolution, margin))
+
+
+def check_path_until(
+    problem: MotionProblem,
+    path: np.ndarray,
+    deadline: float | None,
+    resolution: float | None = None,
+    margin: float | None = 0.0,
+) -> bool | None:
+    """Dense check in bisection order that gives up at ``deadline`` (``time.perf_counter``).
+
+    True: every state valid; False: an invalid state; None: the deadline passed first.
+    """
+    dense = _interpolate(path, resolution or problem.resolution)
+    for count, i in enumerate(_bisection_order(len(dense))):
+        if deadline is not None and count % 8 == 0 and time.perf_counter() > deadline:
+            return None
+        if not problem.is_valid(dense[i], margin=margin):
+            return False
+    return True
 
 
 def path_length(robot: Robot, path: np.ndarray) -> float:
@@ -395,17 +481,28 @@ def _state(space: Any, q: Array) -> Any:
     return state
 
 
+def geometric_planner_names() -> list[str]:
+    """The ``ompl.geometric`` planner classes this OMPL build offers (for lookups by name)."""
+    ob, og, _ = _ompl()
+    return sorted(n for n in dir(og) if isinstance(getattr(og, n), type) and issubclass(getattr(og, n), ob.Planner))
+
+
 def planner_class(name: str) -> Any:
-    """The OMPL geometric planner class for a plugin name or an ``og`` class name."""
+    """The OMPL geometric planner class for a plugin name or an ``og`` class name.
+
+    No substitution: a planner this OMPL build lacks (e.g. LazyPRM in the ompl 2.0.1 wheel)
+    is an error that lists the planners that exist.
+    """
     _, og, _ = _ompl()
-    cls_name = GEOMETRIC_PLANNERS.get(name, name)
-    cls = getattr(og, cls_name, None)
-    if cls is None and cls_name in LAZY_FALLBACK:  # LazyPRM is not in the ompl 2.0.1 wheel
-        cls = getattr(og, LAZY_FALLBACK[cls_name], None)
-    if cls is None:
-        valid = sorted(set(GEOMETRIC_PLANNERS) | {n for n in dir(og) if n[0].isupper()})
-        raise ValueError(f"unknown OMPL planner {name!r} (valid: {', '.join(valid)})")
-    return cls
+    cls_name = GEOMETRIC_PLANNERS.get(name) or OPTIONAL_GEOMETRIC.get(name) or name
+    available = geometric_planner_names()
+    if cls_name not in available:
+        aliases = [k for k, v in GEOMETRIC_PLANNERS.items() if v in available]
+        raise ValueError(f"unknown OMPL planner {name!r} (this OMPL offers: {', '.join(aliases + available)})")
+    return getattr(og, cls_name)
+
+
+SOLVE_SHARE = 0.5  # share of the remaining time a coarse search may use (the rest re-checks or retries)
 
 
 def plan(
@@ -423,41 +520,72 @@ def plan(
 ) -> MotionPlan | None:
     """A collision-free joint path from ``start`` to ``goal`` with an OMPL geometric planner.
 
-    Only exact solutions are returned, and every returned path is re-checked every
-    ``problem.resolution`` (L2, rad) with the clearance margin. Speed (``benchmarks/planners.py``,
-    workcell): the search checks motions every ``check_factor * problem.resolution`` (the
-    dense re-check guards the result; if it fails, the search is repeated at the fine
-    resolution with the time left), and simplification is bounded: ``reduceVertices`` and
-    ``collapseCloseVertices`` (shortcuts between path vertices, cf. the thesis' RRT-Connect +
-    Berchtold-Glavina smoothing) instead of ``ss.simplifySolution``, whose B-spline smoothing
-    and perturbation ran 0.3-0.4 s (1,800-2,300 validity checks) past a 0.1 s budget on an
-    iiwa query whose answer is one straight segment.
+    Only exact solutions are returned, and every returned segment has been checked every
+    ``problem.resolution`` (L2) with the clearance margin, as the robot executes it (a
+    differential base turns, drives and turns: OMPL checks motions with that local planner,
+    :func:`_executed_motion_validator`). ``time_limit`` bounds the whole call: the search,
+    the simplification, the re-check and the retry (wall time from entry; one validity
+    check may run past it).
+
+    Speed (``benchmarks/planners.py``): the first search checks motions every
+    ``check_factor * problem.resolution`` with at most ``SOLVE_SHARE`` of the time, its result
+    is re-checked densely; if that fails, the search is repeated at the fine resolution
+    (whose result OMPL has checked densely already) with the time left. Simplification is
+    bounded: ``reduceVertices`` and ``collapseCloseVertices`` (shortcuts between path
+    vertices, cf. the thesis' RRT-Connect + Berchtold-Glavina smoothing) instead of
+    ``ss.simplifySolution``, whose B-spline smoothing and perturbation ran 0.3-0.4 s past a
+    0.1 s budget on an iiwa query whose answer is one straight segment.
     """
+    t0 = time.perf_counter()
+    deadline = t0 + float(time_limit)
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
     if not problem.is_valid(start) or not problem.is_valid(goal):
         return None
     if try_direct:  # the straight segment first (what simplification would return anyway)
-        direct = straight_line(problem, start, goal)
+        direct = straight_line(problem, start, goal, deadline=deadline)
         if direct is not None:
             direct.planner = planner
+            direct.planning_time = time.perf_counter() - t0
             return direct
-    t0 = time.perf_counter()
     factors = [max(1.0, float(check_factor))] + ([1.0] if check_factor > 1.0 else [])
     for attempt, factor in enumerate(factors):
-        remaining = float(time_limit) - (time.perf_counter() - t0)
+        remaining = deadline - time.perf_counter()
         if remaining <= 0.0:
             break
+        coarse = factor > 1.0
         seed_ompl(None if seed is None else seed + attempt)
-        path = _ompl_search(problem, start, goal, planner, remaining, simplify, range, goal_threshold, factor)
+        budget = remaining * SOLVE_SHARE if coarse else remaining
+        path = _ompl_search(problem, start, goal, planner, budget, simplify, range, goal_threshold, factor, deadline)
         if path is None:
-            if attempt == 0 and factor > 1.0 and time.perf_counter() - t0 < float(time_limit):
-                continue  # coarse search gave up early (e.g. an approximate solution); try fine
-            break
-        # OMPL checks motions with its own resolution; make sure every returned segment is valid
-        if validate_path(problem, path, margin=None) is None:
-            elapsed = time.perf_counter() - t0
-            return MotionPlan(path, planner=planner, planning_time=elapsed, length=path_length(problem.robot, path))
+            continue  # coarse search gave up (e.g. only an approximate solution): try fine
+        if coarse:  # OMPL checked every factor x resolution: check the rest now, within the limit
+            verdict = check_path_until(problem, problem.motion_path(path), deadline, margin=None)
+            if verdict is None:
+                break
+            if not verdict:
+                continue
+        return MotionPlan(path, planner=planner, planning_time=time.perf_counter() - t0,
+                          length=path_length(problem.robot, problem.motion_path(path)))
     return None
+
+
+def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int, deadline: float | None) -> Any:
+    """OMPL motion validator that checks the motion the robot executes (turn-drive-turn).
+
+    A subclass of ``ompl.base.MotionValidator`` (the nanobind bindings call the Python
+    ``checkMotion``), for robots whose ``execution_path`` differs from the straight segment
+    (a differential base). Past ``deadline`` every motion is invalid (the search winds down).
+    """
+    ob, _, _ = _ompl()
+
+    class Validator(ob.MotionValidator):
+        def checkMotion(self, a: Any, b: Any, *last_valid: Any) -> bool:  # noqa: N802 - OMPL's name
+            qa = [a[i] for i in builtins_range(n)]
+            qb = [b[i] for i in builtins_range(n)]
+            path = problem.motion_path(np.array([qa, qb]))
+            return bool(check_path_until(problem, path, deadline, resolution, margin=None))
+
+    return Validator(si)
 
 
 def _ompl_search(
@@ -470,31 +598,40 @@ def _ompl_search(
     step: float,
     goal_threshold: float,
     check_factor: float,
+    deadline: float | None = None,
 ) -> np.ndarray | None:
-    """One OMPL solve with motions checked every ``check_factor * problem.resolution``."""
+    """One OMPL solve with motions checked every ``check_factor * problem.resolution``.
+
+    Simplification runs in rounds of 10 shortcut attempts until one round changes nothing or
+    ``deadline`` passes (the path is valid after every round).
+    """
     ob, og, _ = _ompl()
     n = len(start)
     space = _space(ob, problem.lower, problem.upper)
     ss = og.SimpleSetup(space)
     ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in builtins_range(n)]))
     si = ss.getSpaceInformation()
-    si.setStateValidityCheckingResolution(
-        min(1.0, check_factor * problem.resolution / max(space.getMaximumExtent(), 1e-9))
-    )
+    resolution = check_factor * problem.resolution
+    si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
+    probe = np.vstack([start, goal])
+    if problem.motion_path(probe).shape != probe.shape:  # the robot does not drive straight segments
+        si.setMotionValidator(_executed_motion_validator(si, problem, resolution, n, deadline))
     instance = planner_class(planner)(si)
     if step > 0 and hasattr(instance, "setRange"):
         instance.setRange(step)
     ss.setPlanner(instance)
     ss.setStartAndGoalStates(_state(space, start), _state(space, goal), goal_threshold)
-    status = ss.solve(float(time_limit))
+    status = ss.solve(max(1e-3, float(time_limit)))
     if not status or not ss.haveExactSolutionPath():
         return None
     solution = ss.getSolutionPath()
     if simplify and solution.getStateCount() > 2:
         simplifier = og.PathSimplifier(si)
-        simplifier.reduceVertices(solution)
-        simplifier.collapseCloseVertices(solution)
-        simplifier.reduceVertices(solution)
+        for shortcut in (simplifier.reduceVertices, simplifier.collapseCloseVertices, simplifier.reduceVertices):
+            # rounds of 10 shortcut attempts (each checks one motion) while time remains
+            while solution.getStateCount() > 2 and (deadline is None or time.perf_counter() < deadline):
+                if not shortcut(solution, 10, 10):
+                    break
     path = np.array(
         [[solution.getState(i)[k] for k in builtins_range(n)] for i in builtins_range(solution.getStateCount())]
     )
@@ -505,15 +642,258 @@ def _ompl_search(
 builtins_range = range  # ``plan`` shadows ``range`` with OMPL's parameter name
 
 
-def straight_line(problem: MotionProblem, start: Array, goal: Array) -> MotionPlan | None:
-    """The straight segment in configuration space if it is valid (the free flyer's planner)."""
+def straight_line(
+    problem: MotionProblem, start: Array, goal: Array, deadline: float | None = None
+) -> MotionPlan | None:
+    """The straight segment in configuration space if it is valid (the free flyer's planner).
+
+    Checked as the robot executes it (``problem.motion_path``); None when invalid or when
+    ``deadline`` (``time.perf_counter``) passes before the check ends.
+    """
     t0 = time.perf_counter()
     path = np.vstack([start, goal]).astype(float)
-    if not path_is_valid(problem, path, margin=None):
+    if not check_path_until(problem, problem.motion_path(path), deadline, margin=None):
         return None
-    return MotionPlan(
-        path, planner="straight_line", planning_time=time.perf_counter() - t0, length=path_length(problem.robot, path)
-    )
+    return MotionPlan(path, planner="straight_line", planning_time=time.perf_counter() - t0,
+                      length=path_length(problem.robot, problem.motion_path(path)))
+
+
+def box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
+    """Signed distance (n,) from points to the nearest of the boxes [lo_b, hi_b].
+
+    Outside a box the Euclidean distance, inside minus the depth below its nearest face.
+    """
+    if len(lo) == 0:
+        return np.full(len(points), np.inf)
+    below, above = lo[None] - points[:, None], points[:, None] - hi[None]  # (n, b, 3)
+    gap = np.maximum(np.maximum(below, 0.0), above)
+    outside = np.sqrt(np.einsum("nbk,nbk->nb", gap, gap))
+    depth = np.minimum(-below, -above).min(axis=2)  # > 0 inside
+    return np.where(outside > 0.0, outside, -np.maximum(depth, 0.0)).min(axis=1)
+
+
+class PlanarChecker:
+    """Validity of base poses (x, y, theta) with every other joint fixed at ``q_ref``.
+
+    The robot then moves as a rigid body in the plane, so points sampled on its surface
+    every ``spacing`` (``robot.link_points``) are moved instead of re-posing pybullet. The
+    PVS test (``problem.space_free`` on those points) is the one :meth:`MotionProblem.is_valid`
+    makes; the known environment is tested against the bodies' bounding boxes: a pose whose
+    points keep ``margin`` + ``slack`` from every box is valid (``slack`` covers the gaps
+    between the surface samples, sqrt(3) x spacing, and convex collision hulls, 2 cm); closer
+    poses get the full pybullet test (``fast`` / ``exact`` count both). Self-collision
+    cannot change (the joints are fixed; ``q_ref`` must be valid). Boxes below (or above) the
+    robot by at least ``margin`` never come closer in a planar motion and are left out (the
+    floor).
+    """
+
+    def __init__(self, problem: MotionProblem, q_ref: Array, spacing: float = 0.015) -> None:
+        robot = problem.robot
+        self.problem, self.q_ref = problem, np.asarray(q_ref, dtype=float).copy()
+        self.base = list(robot.base_dofs)
+        x, y, th = self.q_ref[self.base]
+        points = robot.link_points(self.q_ref, spacing=spacing)
+        c, s = math.cos(th), math.sin(th)
+        rel = points[:, :2] - (x, y)
+        self.local = np.ascontiguousarray(np.column_stack([c * rel[:, 0] + s * rel[:, 1],
+                                                           -s * rel[:, 0] + c * rel[:, 1]]))
+        self.radius = float(np.sqrt((self.local**2).sum(axis=1)).max(initial=0.0))
+        self.z = np.ascontiguousarray(points[:, 2])
+        self.margin = problem.margin
+        self.slack = math.sqrt(3.0) * float(spacing) + 0.02
+        boxes = []
+        sim = getattr(robot, "sim", None)
+        if sim is not None and len(points):
+            from .bullet import p
+
+            zmin, zmax = float(self.z.min()), float(self.z.max())
+            for body in sim.environment_ids():
+                lo, hi = p.getAABB(body, physicsClientId=sim.client)
+                if hi[2] <= zmin - self.margin or lo[2] >= zmax + self.margin:
+                    continue
+                boxes.append((lo, hi))
+        self.lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 3)
+        self.hi = np.array([b[1] for b in boxes], dtype=float).reshape(-1, 3)
+        self.lower, self.upper = problem.lower[self.base], problem.upper[self.base]
+        self._points = np.empty((len(self.local), 3))
+        if problem.space_free is None:
+            self._box = (np.full(3, np.inf), np.full(3, -np.inf))
+        elif problem.space_bounds is None:  # an unknown free-space test: every point goes to it
+            self._box = (np.full(3, -np.inf), np.full(3, np.inf))
+        else:
+            self._box = tuple(np.asarray(b, dtype=float) for b in problem.space_bounds)
+        self.fast = 0
+        self.exact = 0
+
+    def full(self, qb: Array) -> Array:
+        """The whole configuration at base pose ``qb``."""
+        q = self.q_ref.copy()
+        q[self.base] = qb
+        return q
+
+    def __call__(self, qb: Array) -> bool:
+        from .motion_kernels import planar_points_clearance
+
+        qb = np.asarray(qb, dtype=float)
+        if np.any(qb < self.lower - 1e-9) or np.any(qb > self.upper + 1e-9):
+            return False
+        clearance, inside = planar_points_clearance(
+            self.local, self.z, self.radius, float(qb[0]), float(qb[1]), float(qb[2]), self.lo, self.hi,
+            self.margin + self.slack, self._box[0], self._box[1], self._points)
+        space_free = self.problem.space_free
+        if space_free is not None and inside:
+            points = self._points
+            near = points[np.all((points >= self._box[0]) & (points <= self._box[1]), axis=1)]
+            if not bool(np.all(space_free(near))):
+                return False
+        if clearance >= self.margin + self.slack:
+            self.fast += 1
+            return True
+        self.exact += 1
+        return self.problem.is_valid(self.full(qb))
+
+
+class _BaseProblem:
+    """The base (x, y, theta) part of a problem with the other joints carried fixed.
+
+    Duck-types :class:`MotionProblem` for :func:`_ompl_search`: validity by a
+    :class:`PlanarChecker`, motions as the robot drives them (``problem.motion_path``).
+    """
+
+    def __init__(self, problem: MotionProblem, carried: Array, lower: Array, upper: Array) -> None:
+        self.problem, self.robot = problem, problem.robot
+        self.checker = PlanarChecker(problem, carried)
+        self.checker.lower, self.checker.upper = lower, upper
+        self.lower, self.upper = lower, upper
+        self.resolution = problem.resolution
+        self.base = self.checker.base
+
+    def is_valid(self, qb: Array, margin: float | None = None) -> bool:
+        return self.checker(qb)
+
+    def full_path(self, path: np.ndarray) -> np.ndarray:
+        out = np.tile(self.checker.q_ref, (len(path), 1))
+        out[:, self.base] = path
+        return out
+
+    def motion_path(self, path: np.ndarray) -> np.ndarray:
+        return self.problem.motion_path(self.full_path(np.asarray(path, dtype=float)))[:, self.base]
+
+
+def _joint_motion(problem: MotionProblem, a: Array, b: Array, deadline: float, seed: int | None) -> np.ndarray | None:
+    """Path moving only the non-base joints from ``a`` to ``b`` (straight if valid, else RRT-Connect).
+
+    Found motions are remembered by the problem while its free space is unchanged (the tuck
+    from the current state is the same for every candidate of an NBV iteration).
+    """
+    if not np.any(np.abs(np.asarray(b) - np.asarray(a)) > 1e-12):
+        return np.vstack([a]).astype(float)
+    key = problem.cache_key(a, b)
+    if key is not None and key in problem.motions:
+        return problem.motions[key]
+    path = np.vstack([a, b]).astype(float)
+    verdict = check_path_until(problem, path, deadline, margin=None)
+    if verdict is None:
+        return None
+    if not verdict:
+        pinned = problem.pinned(list(problem.robot.base_dofs), a)
+        sub = plan(pinned, a, b, "rrt_connect", time_limit=max(0.0, deadline - time.perf_counter()), seed=seed)
+        if sub is None:
+            return None
+        path = sub.path
+    if key is not None:
+        if len(problem.motions) > 512:  # older free-space versions
+            problem.motions.clear()
+        problem.motions[key] = path
+    return path
+
+
+def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: bool) -> list[Array]:
+    """Joint values to drive with, best first: the robot's ``travel_joints`` (with ``tuck``),
+    the start's, the goal's; each valid at the start and at the goal base pose."""
+    robot = problem.robot
+    base = list(robot.base_dofs)
+    joints = [i for i in builtins_range(len(start)) if i not in base]
+    options = [start[joints], goal[joints]]
+    travel = getattr(robot, "travel_joints", None)
+    if tuck and travel is not None and joints:
+        options.insert(0, np.asarray(travel, dtype=float))
+    out: list[Array] = []
+    for values in options:
+        if any(np.allclose(values, o) for o in out):
+            continue
+        a, b = start.copy(), goal.copy()
+        a[joints], b[base] = values, goal[base]
+        b[joints] = values
+        if problem.is_valid(a) and problem.is_valid(b):
+            out.append(values)
+    return out
+
+
+def _mobile_plan(
+    problem: MotionProblem,
+    start: Array,
+    goal: Array,
+    drive: Callable[[_BaseProblem, Array, Array, float], tuple[np.ndarray, np.ndarray] | None],
+    time_limit: float,
+    seed: int | None,
+    tuck: bool,
+    name: str,
+) -> MotionPlan | None:
+    """Joints to the carried values, the base by ``drive``, joints to the goal; one MotionPlan.
+
+    ``drive(base_problem, start_base, goal_base, deadline)`` returns the base rollout (m + 1, 3)
+    at ``robot.dt`` and its base controls (m, nb), or None. The drive is checked by the
+    planar checker, the joint motions with pybullet, all within ``time_limit``.
+    """
+    t0 = time.perf_counter()
+    deadline = t0 + float(time_limit)
+    robot = problem.robot
+    base = list(robot.base_dofs)
+    if not base:
+        raise ValueError(f"{robot.name} has no base to drive")
+    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float).copy()
+    if not problem.is_valid(start) or not problem.is_valid(goal):
+        return None
+    th = base[2]
+    goal[th] = start[th] + _wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
+    joints = [i for i in builtins_range(len(start)) if i not in base]
+    lower, upper = problem.lower[base].copy(), problem.upper[base].copy()
+    lower[2], upper[2] = start[th] - 2 * math.pi, start[th] + 2 * math.pi
+    for values in _carried_joints(problem, start, goal, tuck):
+        if time.perf_counter() >= deadline:
+            return None
+        carried = start.copy()
+        carried[joints] = values
+        first = _joint_motion(problem, start, carried, deadline, seed)
+        if first is None:
+            continue
+        sub = _BaseProblem(problem, carried, lower, upper)
+        driven = drive(sub, carried[base], goal[base], deadline)
+        if driven is None:
+            continue
+        rollout, base_controls = driven
+        reached = carried.copy()
+        reached[base] = rollout[-1]
+        target = reached.copy()
+        target[joints] = goal[joints]
+        last = _joint_motion(problem, reached, target, deadline, None if seed is None else seed + 1)
+        if last is None:
+            continue
+        pieces, control_pieces = [start[None]], []
+        for joint_path in (first, None, last):
+            if joint_path is None:
+                pieces.append(sub.full_path(rollout[1:]))
+                control_pieces.append(robot.base_to_full_controls(base_controls))
+            elif len(joint_path) > 1:
+                joint_controls, rolled = robot.controls_from_path(joint_path)
+                control_pieces.append(joint_controls)
+                pieces.append(rolled[1:])
+        path = np.vstack(pieces)
+        exact = bool(np.linalg.norm(rollout[-1] - goal[base]) < 1e-6)
+        return MotionPlan(path, controls=np.vstack(control_pieces), dt=float(robot.dt), planner=name,
+                          planning_time=time.perf_counter() - t0, exact=exact, length=path_length(robot, path))
+    return None
 
 
 def plan_kinodynamic(
@@ -522,108 +902,183 @@ def plan_kinodynamic(
     goal: Array,
     planner: str = "rrt",
     time_limit: float = 5.0,
-    goal_tolerance: float = 0.05,
+    goal_tolerance: float = 0.4,
     seed: int | None = None,
-    max_steps: int = 20,
+    max_duration: float = 4.0,
+    tuck: bool = True,
+    goal_bias: float = 0.05,
+    propagation_step: float = 0.2,
+    min_duration: float = 0.8,
+    connect: bool = True,
 ) -> MotionPlan | None:
-    """Base motion with velocity controls (``ompl.control``), then the other joints.
+    """Base motion with velocity controls (``ompl.control``) between joint motions.
 
-    The base (x, y, theta) is planned with the robot's drive model (``robot.propagate``:
-    unicycle for a differential drive, omnidirectional otherwise) while the other joints
-    keep their start values; at the base goal the remaining joints move to the goal along a
-    checked straight line (or an RRT-Connect path). OMPL 2.0.1's Python bindings offer no
-    bidirectional control planner, so ``planner`` is one of rrt, kpiece, sst, est, pdst.
-    Returns per-step controls (``MotionPlan.controls``, held ``robot.dt`` each).
+    1. With ``tuck`` (and a robot with ``travel_joints``, the mobile manipulator's ``home``)
+       the arm first moves to its travel configuration at the start base pose (else the
+       start's or the goal's joints are carried, whichever is valid at both ends);
+    2. the base (x, y, theta) is planned with the robot's drive model (``robot.propagate_base``:
+       unicycle for a differential drive, omnidirectional otherwise), every other joint fixed,
+       until it is within ``goal_tolerance`` (L2 in m and rad) of the goal base pose; with
+       ``connect`` the robot's own steering (turn-drive-turn, or a straight omnidirectional
+       move) then closes the gap to the goal when that motion is valid;
+    3. the other joints move to their goal values at the reached base pose.
+
+    States are checked by :class:`PlanarChecker` (rigid planar motion of surface points
+    against boxes and the PVS; pybullet near obstacles) every ``propagation_step`` seconds
+    (rounded to multiples of ``robot.dt``), and the nominal rollout between them at
+    ``problem.resolution``; a control is held ``min_duration``..``max_duration`` seconds and
+    integrated at dt (the executor's Euler step); RRT extends toward the goal with probability
+    ``goal_bias`` (the other control planners of the ompl 2.0.1 bindings expose no goal bias;
+    SST and PDST have no constructor there); KPIECE and EST project states on (x, y).
+    ``time_limit`` bounds the whole call. The defaults were tuned on ``benchmarks/planners.py``
+    (cluttered, mobile manipulator): long controls and steps and a 0.4 goal region, closed by
+    the steering, beat short ones (few states per second with a Python propagator).
+    Returns per-step controls (``MotionPlan.controls``, held dt each) and their nominal
+    rollout; if the gap could not be closed, the final configuration is the reached one
+    (within the tolerance of ``goal``, ``MotionPlan.exact`` False): Vasquez-Gomez's RRT
+    Ext-Ext leaves such a gap too.
     """
     ob, _, _ = _ompl()
     from ompl import control as oc
 
+    cls = control_planner_class(planner)
     robot = problem.robot
-    base = list(robot.base_dofs)
-    if not base:
-        raise ValueError(f"{robot.name} has no base to plan kinodynamically")
-    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
-    if not problem.is_valid(start) or not problem.is_valid(goal):
-        return None
-    seed_ompl(seed)
-    t0 = time.perf_counter()
     dt = float(robot.dt)
-    space = _space(ob, problem.lower[base], problem.upper[base])
-    limits = robot.base_control_limits()  # (nb,) max |u| of the base controls
-    cspace = oc.RealVectorControlSpace(space, len(limits))
-    cbounds = ob.RealVectorBounds(len(limits))
-    for i, u in enumerate(limits):
-        cbounds.setLow(i, -float(u))
-        cbounds.setHigh(i, float(u))
-    cspace.setBounds(cbounds)
-    ss = oc.SimpleSetup(cspace)
-    nb, nc = len(base), len(limits)
 
-    def full(s: Any) -> Array:
-        q = start.copy()
-        q[base] = [s[i] for i in builtins_range(nb)]
-        return q
+    def drive(sub: _BaseProblem, a: Array, b: Array, deadline: float) -> tuple[np.ndarray, np.ndarray] | None:
+        seed_ompl(seed)
+        space = _space(ob, sub.lower, sub.upper)
+        limits = robot.base_control_limits()  # (nb,) max |u| of the base controls
+        cspace = oc.RealVectorControlSpace(space, len(limits))
+        cbounds = ob.RealVectorBounds(len(limits))
+        for i, u in enumerate(limits):
+            cbounds.setLow(i, -float(u))
+            cbounds.setHigh(i, float(u))
+        cspace.setBounds(cbounds)
+        ss = oc.SimpleSetup(cspace)
+        nc = len(limits)
+        ss.setStateValidityChecker(lambda s: sub.checker([s[0], s[1], s[2]]))
 
-    ss.setStateValidityChecker(lambda s: problem.is_valid(full(s)))
+        def propagate(s: Any, u: Any, duration: float, result: Any) -> None:
+            q = np.array([s[0], s[1], s[2]])
+            control = np.array([u[i] for i in builtins_range(nc)])
+            steps = max(1, int(round(duration / dt)))
+            for _ in builtins_range(steps):  # Euler at the executor's dt
+                q = robot.propagate_base(q, control, duration / steps)
+            result[0], result[1], result[2] = float(q[0]), float(q[1]), float(q[2])
 
-    def propagate(s: Any, u: Any, duration: float, result: Any) -> None:
-        q = np.array([s[i] for i in builtins_range(nb)])
-        q = robot.propagate_base(q, np.array([u[i] for i in builtins_range(nc)]), duration)
-        for i in builtins_range(nb):
-            result[i] = float(q[i])
+        ss.setStatePropagator(propagate)
+        space.registerDefaultProjection(ob.RealVectorOrthogonalProjectionEvaluator(space, [0, 1]))  # KPIECE, EST
+        si = ss.getSpaceInformation()
+        step = dt * max(1, int(round(propagation_step / dt)))
+        si.setPropagationStepSize(step)
+        shortest = max(1, int(round(min_duration / step)))
+        si.setMinMaxControlDuration(shortest, max(shortest, int(round(max_duration / step))))
+        instance = cls(si)
+        if hasattr(instance, "setGoalBias"):
+            instance.setGoalBias(float(goal_bias))
+        ss.setPlanner(instance)
+        ss.setStartAndGoalStates(_state(space, a), _state(space, b), goal_tolerance)
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0.0:
+            return None
+        status = ss.solve(max(1e-3, remaining * 0.8))  # the rest: the final joint motion and its check
+        if not status or not ss.haveExactSolutionPath():
+            return None
+        solution = ss.getSolutionPath()
+        controls = []
+        for i in builtins_range(solution.getControlCount()):
+            u = [solution.getControl(i)[k] for k in builtins_range(nc)]
+            controls.extend([u] * max(1, int(round(solution.getControlDuration(i) / dt))))
+        base_controls = np.asarray(controls, dtype=float).reshape(-1, nc)
+        rollout = [np.asarray(a, dtype=float)]  # the nominal rollout at dt (what the executor runs)
+        for u in base_controls:
+            rollout.append(robot.propagate_base(rollout[-1], u, dt))
+        rollout = np.asarray(rollout)
+        if not check_path_until(sub, rollout, deadline):  # between the propagation steps too
+            return None
+        if connect and np.linalg.norm(rollout[-1] - b) > 1e-9:  # close the gap with the robot's steering
+            steer_controls, steered = robot.controls_from_path(sub.full_path(np.vstack([rollout[-1], b])))
+            steered = steered[:, sub.base]
+            if len(steer_controls) and check_path_until(sub, sub.motion_path(steered), deadline):
+                rollout = np.vstack([rollout, steered[1:]])
+                base_controls = np.vstack([base_controls, steer_controls[:, :nc]])
+        return rollout, base_controls
 
-    ss.setStatePropagator(propagate)
-    si = ss.getSpaceInformation()
-    si.setPropagationStepSize(dt)
-    si.setMinMaxControlDuration(1, max_steps)
-    si.setStateValidityCheckingResolution(problem.resolution / max(space.getMaximumExtent(), 1e-9))
-    cls = getattr(oc, CONTROL_PLANNERS.get(planner, planner), None)
-    if cls is None:
-        raise ValueError(f"unknown control planner {planner!r} (valid: {', '.join(CONTROL_PLANNERS)})")
-    ss.setPlanner(cls(si))
-    ss.setStartAndGoalStates(_state(space, start[base]), _state(space, goal[base]), goal_tolerance)
-    status = ss.solve(float(time_limit))
-    if not status or not ss.haveExactSolutionPath():
-        return None
-    solution = ss.getSolutionPath()
-    controls = []
-    for i in builtins_range(solution.getControlCount()):
-        u = [solution.getControl(i)[k] for k in builtins_range(nc)]
-        steps = max(1, int(round(solution.getControlDuration(i) / dt)))
-        controls.extend([u] * steps)
-    base_controls = np.asarray(controls, dtype=float)
-    # roll the controls out (this is the nominal trajectory the executor will follow)
-    configs = [start.copy()]
-    for u in base_controls:
-        q = configs[-1].copy()
-        q[base] = robot.propagate_base(q[base], u, dt)
-        configs.append(q)
-    reached = configs[-1]
-    others = [i for i in builtins_range(len(start)) if i not in base]
-    tail = np.vstack([reached, np.concatenate([reached[base], goal[others]])[np.argsort(base + others)]])
-    if others and np.any(np.abs(tail[1] - tail[0]) > 1e-12):
-        if validate_path(problem, tail, margin=None) is not None:
-            sub = plan(problem, tail[0], tail[1], "rrt_connect", time_limit=max(0.5, time_limit / 2), seed=seed)
-            if sub is None:
-                return None
-            tail = sub.path
-        joint_controls, joint_path = robot.controls_from_path(tail)
-        full_controls = np.vstack([robot.base_to_full_controls(base_controls), joint_controls])
-        path = np.vstack([np.asarray(configs), joint_path[1:]])
-    else:
-        full_controls = robot.base_to_full_controls(base_controls)
-        path = np.asarray(configs)
-    if validate_path(problem, path, margin=None) is not None:
-        return None
-    return MotionPlan(
-        path,
-        controls=full_controls,
-        dt=dt,
-        planner=f"kinodynamic_{planner}",
-        planning_time=time.perf_counter() - t0,
-        exact=True,
-        length=path_length(robot, path),
-    )
+    return _mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"kinodynamic_{planner}")
+
+
+def plan_mobile(
+    problem: MotionProblem,
+    start: Array,
+    goal: Array,
+    planner: str = "rrt_connect",
+    time_limit: float = 5.0,
+    seed: int | None = None,
+    tuck: bool = True,
+    simplify: bool = True,
+) -> MotionPlan | None:
+    """Tuck, drive, untuck with an OMPL geometric planner for the base (x, y, theta).
+
+    As :func:`plan_kinodynamic`, but the base path comes from a (bidirectional) geometric
+    planner whose local planner is the robot's own steering: a differential base turns,
+    drives straight and turns (``robot.execution_path``), so every base segment is
+    executable exactly; an omnidirectional base drives the segment. States and motions are
+    checked by :class:`PlanarChecker` every ``problem.resolution`` (L2 of m and rad). The
+    plan's controls follow the path exactly (``robot.controls_from_path``).
+    """
+    robot = problem.robot
+
+    def drive(sub: _BaseProblem, a: Array, b: Array, deadline: float) -> tuple[np.ndarray, np.ndarray] | None:
+        seed_ompl(seed)
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0.0:
+            return None
+        path = _ompl_search(sub, a, b, planner, remaining * 0.8, simplify, 0.0, 1e-6, 1.0, deadline)
+        if path is None:
+            return None
+        controls, rolled = robot.controls_from_path(sub.full_path(path))
+        base = list(robot.base_dofs)
+        return rolled[:, base], controls[:, : robot.n_base_controls]
+
+    return _mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"mobile_{planner}")
+
+
+def control_planner_class(name: str) -> Any:
+    """The ``ompl.control`` planner class for a plugin name (only classes the bindings can build)."""
+    available = control_planner_names()
+    cls_name = CONTROL_PLANNERS.get(name, name)
+    if cls_name not in available.values():
+        raise ValueError(f"unknown or unavailable control planner {name!r} (this OMPL offers: "
+                         f"{', '.join(available)}; ompl 2.0.1's bindings cannot construct SST or PDST)")
+    from ompl import control as oc
+
+    return getattr(oc, cls_name)
+
+
+def control_planner_names() -> dict[str, str]:
+    """Plugin name -> ``ompl.control`` class of the control planners this OMPL can construct."""
+    ob, _, _ = _ompl()
+    from ompl import control as oc
+
+    space = ob.RealVectorStateSpace(1)
+    bounds = ob.RealVectorBounds(1)
+    bounds.setLow(0.0)
+    bounds.setHigh(1.0)
+    space.setBounds(bounds)
+    si = oc.SimpleSetup(oc.RealVectorControlSpace(space, 1)).getSpaceInformation()
+    out = {}
+    for name, cls_name in CONTROL_PLANNERS.items():
+        try:
+            getattr(oc, cls_name)(si)
+        except (AttributeError, TypeError):  # missing, or "no constructor defined" in the bindings
+            continue
+        out[name] = cls_name
+    return out
+
+
+def _wrap_angle(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 # -- scan paths and the NBS rule ---------------------------------------------------------------

@@ -28,6 +28,7 @@ BUILTIN_MODULES = (
     "registrars",
     "behaviours",
     "scene_behaviours",
+    "nbvs_behaviours",
     "executors",
 )
 

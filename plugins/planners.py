@@ -12,9 +12,31 @@ from typing import Any
 
 import numpy as np
 
-from explore.motion import MotionPlan, MotionProblem, plan, plan_kinodynamic, straight_line
+from explore.errors import BadInput
+from explore.motion import (
+    OPTIONAL_GEOMETRIC,
+    MotionPlan,
+    MotionProblem,
+    control_planner_names,
+    plan,
+    plan_kinodynamic,
+    plan_mobile,
+    planner_class,
+    straight_line,
+)
 from explore.params import Param
 from explore.typed import Array
+
+
+def _control_choices() -> tuple[str, ...]:
+    """The ompl.control planners the installed bindings can construct (rrt, kpiece, est with 2.0.1)."""
+    try:
+        return tuple(control_planner_names())
+    except ImportError:
+        return ("rrt",)
+
+
+CONTROL_CHOICES = _control_choices()
 
 _GEOMETRIC = (
     Param("time_limit", float, 1.0, "s", "planning time limit", low=0.001),
@@ -66,16 +88,22 @@ RRTConnect = _geometric(
 RRT = _geometric("rrt", "RRT", "Single-tree RRT (LaValle 1998).")
 RRTStar = _geometric("rrt_star", "RRTstar", "Asymptotically optimal RRT* (uses the whole time limit).")
 PRM = _geometric("prm", "PRM", "Probabilistic roadmap (Kavraki 1996), as in Kriegel et al. 2012.")
-LazyPRM = _geometric("lazy_prm", "LazyPRM", "Lazy PRM: edges checked only on the candidate path.")
 KPIECE = _geometric("kpiece", "KPIECE1", "KPIECE: projection-based cell exploration.")
 BITStar = _geometric("bit_star", "BITstar", "Batch informed trees BIT* (asymptotically optimal).")
 
 
 class OmplByName(GeometricPlanner):
-    """Any other OMPL geometric planner, chosen by its ompl.geometric class name."""
+    """Any OMPL geometric planner by its ompl.geometric class name (the wheel's list; no LazyPRM in ompl 2.0.1)."""
 
     name = "ompl"
     params = (Param("planner", str, "BKPIECE1", "", "ompl.geometric class name (e.g. FMT, PRMstar)"), *_GEOMETRIC)
+
+    def __init__(self, **values: Any) -> None:
+        super().__init__(**values)
+        try:
+            planner_class(self.planner)
+        except ValueError as error:
+            raise BadInput("<motion_planner ompl>", "planner", str(error)) from None
 
     def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
         return plan(
@@ -93,15 +121,23 @@ class OmplByName(GeometricPlanner):
 
 
 class Kinodynamic:
-    """Kinodynamic base planner (ompl.control, unicycle/omni model) returning velocity controls."""
+    """Kinodynamic base planner (ompl.control, unicycle/omni model): tuck, drive, untuck; velocity controls."""
 
     kind = "motion_planner"
     name = "kinodynamic"
     params = (
-        Param("time_limit", float, 5.0, "s", "planning time limit", low=0.001),
-        Param("planner", str, "rrt", "", "ompl.control planner", choices=("rrt", "kpiece", "sst", "est", "pdst")),
-        Param("goal_tolerance", float, 0.05, "", "goal distance in configuration space (m, rad)", low=1e-4),
-        Param("max_steps", int, 20, "", "max control duration in dt steps", low=1),
+        Param("time_limit", float, 5.0, "s", "planning time limit (the whole call)", low=0.001),
+        Param("planner", str, "rrt", "", "ompl.control planner (SST and PDST cannot be built with ompl 2.0.1)",
+              choices=CONTROL_CHOICES),
+        Param("goal_tolerance", float, 0.4, "", "goal region radius around the base goal (L2 of m and rad)",
+              low=1e-4),
+        Param("connect", bool, True, "", "close the gap to the goal with the robot's steering when valid"),
+        Param("propagation_step", float, 0.2, "s", "OMPL propagation step (states checked there)", low=1e-3),
+        Param("min_duration", float, 0.8, "s", "shortest control duration", low=1e-3),
+        Param("max_duration", float, 4.0, "s", "longest control duration", low=1e-3),
+        Param("goal_bias", float, 0.05, "", "probability that RRT extends toward the goal (rrt only)",
+              low=0.0, high=1.0),
+        Param("tuck", bool, True, "", "move the arm to its travel configuration before driving"),
     )
 
     def __init__(self, **values: Any) -> None:
@@ -109,10 +145,37 @@ class Kinodynamic:
             setattr(self, key, value)
 
     def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
-        """Controls for the base (then the other joints) from ``start`` to near ``goal``."""
+        """Controls: joints to travel configuration, the base to near ``goal``, joints to ``goal``."""
         return plan_kinodynamic(
-            problem, start, goal, self.planner, self.time_limit, self.goal_tolerance, seed, self.max_steps
+            problem, start, goal, self.planner, self.time_limit, self.goal_tolerance, seed, self.max_duration,
+            tuck=self.tuck, goal_bias=self.goal_bias, propagation_step=self.propagation_step,
+            min_duration=self.min_duration, connect=self.connect,
         )
+
+
+class TuckAndDrive:
+    """Mobile robots: arm to travel configuration, base path by an OMPL geometric planner, arm to goal."""
+
+    kind = "motion_planner"
+    name = "tuck_and_drive"
+    params = (
+        Param("time_limit", float, 5.0, "s", "planning time limit (the whole call)", low=0.001),
+        Param("planner", str, "rrt_connect", "", "OMPL geometric planner of the base path (x, y, theta)"),
+        Param("tuck", bool, True, "", "move the arm to its travel configuration before driving"),
+        Param("simplify", bool, True, "", "shortcut the base path between its vertices"),
+    )
+
+    def __init__(self, **values: Any) -> None:
+        for key, value in values.items():
+            setattr(self, key, value)
+        try:
+            planner_class(self.planner)
+        except ValueError as error:
+            raise BadInput("<motion_planner tuck_and_drive>", "planner", str(error)) from None
+
+    def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
+        """Controls along joints -> travel, a turn-drive-turn (or omni) base path, travel -> goal joints."""
+        return plan_mobile(problem, start, goal, self.planner, self.time_limit, seed, self.tuck, self.simplify)
 
 
 class StraightLine:
@@ -126,4 +189,17 @@ class StraightLine:
         return straight_line(problem, np.asarray(start, dtype=float), np.asarray(goal, dtype=float))
 
 
-PLUGINS = [RRTConnect, RRT, RRTStar, PRM, LazyPRM, KPIECE, BITStar, OmplByName, Kinodynamic, StraightLine]
+def _optional_planners() -> list[type[GeometricPlanner]]:
+    """Planners registered only if the installed OMPL binds them (ompl 2.0.1's wheel has no
+    LazyPRM / LazyPRMstar, so ``lazy_prm`` is then absent: never silently another planner)."""
+    try:
+        from ompl import geometric as og
+    except ImportError:
+        return []
+    docs = {"lazy_prm": "Lazy PRM (Bohlin & Kavraki 2000): edges checked only on the candidate path.",
+            "lazy_prm_star": "Asymptotically optimal Lazy PRM*."}
+    return [_geometric(name, cls, docs[name]) for name, cls in OPTIONAL_GEOMETRIC.items() if hasattr(og, cls)]
+
+
+PLUGINS = [RRTConnect, RRT, RRTStar, PRM, KPIECE, BITStar, OmplByName, Kinodynamic, TuckAndDrive, StraightLine,
+           *_optional_planners()]

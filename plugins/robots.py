@@ -5,7 +5,8 @@ Every robot exposes FK to the sensor pose (OpenCV frame), IK with restarts, join
 points sampled on the links for the PVS), the weighted configuration distance of
 Vasquez-Gomez Eq. 8, and ``execute(plan, rng, noise=True)``: velocity controls with
 truncated Gaussian noise (Vasquez-Gomez Sec. A6: sigma_v = 1.65 mm/s, sigma_omega =
-0.28 rad/s, beta = 3 sigma; arm joints optional), Euler-integrated every ``dt``, each executed
+0.28 rad/s, beta = 3 sigma; arm joints optional; only on the controls of parts commanded to
+move, see ``noise_mask``), Euler-integrated every ``dt``, each executed
 configuration checked against the TRUE world (environment + objects). Robot bodies are not
 part of the ground truth the sensors cast rays against (``sim.raycaster``).
 """
@@ -52,6 +53,11 @@ def _planar(x: float, y: float, theta: float, z: float = 0.0) -> Pose:
     pose[:3, :3] = _rot_z(theta)
     pose[:3, 3] = (x, y, z)
     return pose
+
+
+def _wrap(angle: float) -> float:
+    """Angle in [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _pose6(values: list[float]) -> Pose:
@@ -139,6 +145,7 @@ class _BulletRobot(Robot):
         self.parts: list[Part] = []
         self.collider: BulletCollider | None = None
         self._local_points: list[tuple[Part, Points3]] = []
+        self._points_at: dict[float, list[tuple[Part, Points3]]] = {}
         self._com_offset: dict[int, Pose] = {}
         self._state: Array | None = None
 
@@ -172,11 +179,15 @@ class _BulletRobot(Robot):
         return frame_pose(state[4], state[5])
 
     def _sample_part_points(self) -> None:
-        """Points on every part's visual/collision geometry, in the part's link frame."""
-        from explore.bullet import body_visual_meshes  # noqa: F401 - same conventions
+        """Points on every part's geometry (``point_spacing`` apart), in the part's link frame."""
+        self._local_points = self._part_point_sets(self.point_spacing)
+        self._points_at = {float(self.point_spacing): self._local_points}
+
+    def _part_point_sets(self, spacing: float) -> list[tuple[Part, Points3]]:
+        """(part, points in its link frame) on every part's visual geometry and extra meshes."""
         from explore.meshes import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 
-        self._local_points = []
+        sets = []
         for part in self.parts:
             meshes = []
             for shape in p.getVisualShapeData(part.body, physicsClientId=self.client):
@@ -194,24 +205,42 @@ class _BulletRobot(Robot):
                 elif geom in (p.GEOM_CYLINDER, p.GEOM_CAPSULE):
                     meshes.append(cylinder_mesh(dims[1], dims[0]).transformed(link_T_visual))
             meshes.extend(self._extra_meshes(part))
-            points = [_surface_samples(m.vertices, m.triangles, self.point_spacing) for m in meshes]
-            local = np.vstack(points) if points else np.zeros((0, 3))
-            self._local_points.append((part, local))
+            points = [_surface_samples(m.vertices, m.triangles, spacing) for m in meshes]
+            sets.append((part, np.vstack(points) if points else np.zeros((0, 3))))
+        return sets
 
     def _extra_meshes(self, part: Part) -> list:
         """Meshes of parts built without visual shapes (boxes of bases, sensor housing)."""
         return getattr(self, "_part_meshes", {}).get(part, [])
 
-    def link_points(self, q: Array) -> Points3:
-        """(n, 3) points sampled on the robot's surface at ``q`` (for PVS free-space tests)."""
+    def link_points(
+        self, q: Array, within: tuple[Array, Array] | None = None, pad: float = 0.05, spacing: float | None = None
+    ) -> Points3:
+        """(n, 3) points sampled on the robot's surface at ``q`` (for PVS free-space tests).
+
+        With ``within`` = (lo, hi) only the parts whose pybullet AABB, grown by ``pad``
+        (visual and collision shapes differ slightly), overlaps that box contribute: a
+        free-space test of a box (the PVS grid) skips the parts far from it. ``spacing``
+        other than ``point_spacing`` samples (and caches) another point set.
+        """
         if self.sim is None:
             return np.zeros((0, 3))
         self.set_config(q)
+        sets = self._local_points
+        if spacing is not None and float(spacing) != float(self.point_spacing):
+            if float(spacing) not in self._points_at:
+                self._points_at[float(spacing)] = self._part_point_sets(float(spacing))
+            sets = self._points_at[float(spacing)]
         out = []
-        for part, local in self._local_points:
-            if len(local):
-                pose = self.part_pose(part)
-                out.append(local @ pose[:3, :3].T + pose[:3, 3])
+        for part, local in sets:
+            if not len(local):
+                continue
+            if within is not None:
+                lo, hi = p.getAABB(part.body, part.link, physicsClientId=self.client)
+                if any(lo[i] - pad > within[1][i] or hi[i] + pad < within[0][i] for i in range(3)):
+                    continue
+            pose = self.part_pose(part)
+            out.append(local @ pose[:3, :3].T + pose[:3, 3])
         return np.vstack(out) if out else np.zeros((0, 3))
 
     def obstacle_ids(self, world: str) -> list[int]:
@@ -308,31 +337,53 @@ class _BulletRobot(Robot):
         return speeds
 
     def _expand_differential(self, path: np.ndarray) -> np.ndarray:
-        """Turn-drive-turn waypoints so a differential base can follow a geometric path."""
+        """Turn-drive-turn waypoints so a differential base can follow a geometric path.
+
+        Each segment a -> b becomes: turn in place to the drive heading, drive straight,
+        turn to b's heading. The drive heading (forwards or backwards) minimises the total
+        turning and takes the value closest to the mean of both headings, and the other
+        joints move in proportion to the time of the three pieces, so the expansion of b -> a
+        is that of a -> b reversed (a symmetric local planner, as OMPL's bidirectional
+        planners assume).
+        """
         x, y, th = self.base_dofs
-        out = [path[0]]
-        for b in path[1:]:
-            a = out[-1]
+        out = [np.asarray(path[0], dtype=float)]
+        for a, b in zip(path[:-1], path[1:], strict=True):
+            a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
             d = b[[x, y]] - a[[x, y]]
-            if np.linalg.norm(d) > 1e-6:
-                heading = math.atan2(d[1], d[0])
-                # drive forwards or backwards, whichever needs the smaller turn
-                options = [heading, heading + math.pi]
-                turns = [(h - a[th] + math.pi) % (2 * math.pi) - math.pi for h in options]
-                turn = min(turns, key=abs)
-                q1 = a.copy()
-                q1[th] = a[th] + turn
-                q2 = q1.copy()
-                q2[[x, y]] = b[[x, y]]
-                out.extend([q1, q2])
-            out.append(b)
+            drive = float(np.hypot(d[0], d[1]))
+            if drive <= 1e-6:
+                out.append(b)
+                continue
+            heading = math.atan2(d[1], d[0])
+            options = (heading, heading + math.pi)
+            cost = [abs(_wrap(h - a[th])) + abs(_wrap(b[th] - h)) for h in options]
+            best = options[int(np.argmin(cost))]
+            mid = 0.5 * (a[th] + b[th])
+            h = mid + _wrap(best - mid)
+            pieces = np.array([abs(h - a[th]) / self.base_turn_speed, drive / self.base_speed,
+                               abs(b[th] - h) / self.base_turn_speed])
+            s1, s2 = np.cumsum(pieces)[:2] / max(float(pieces.sum()), 1e-12)
+            q1, q2 = a + s1 * (b - a), a + s2 * (b - a)
+            q1[[x, y]], q1[th] = a[[x, y]], h
+            q2[[x, y]], q2[th] = b[[x, y]], h
+            out.extend([q1, q2, b])
         return np.asarray(out)
+
+    def execution_path(self, path: np.ndarray) -> np.ndarray:
+        """The piecewise-linear configuration path that ``controls_from_path`` executes.
+
+        A differential base cannot move sideways: its segments become turn-drive-turn
+        (:meth:`_expand_differential`); every other robot follows the path as it is.
+        """
+        path = np.asarray(path, dtype=float)
+        if self.drive == "differential" and self.base_dofs:
+            return self._expand_differential(path)
+        return path
 
     def controls_from_path(self, path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nominal per-``dt`` velocity controls following ``path``, and the nominal rollout."""
-        path = np.asarray(path, dtype=float)
-        if self.drive == "differential" and self.base_dofs:
-            path = self._expand_differential(path)
+        path = self.execution_path(path)
         speeds = self._speeds()
         nb = self.n_base_controls
         controls = []
@@ -369,8 +420,9 @@ class _BulletRobot(Robot):
         """Configurations under ``controls`` + truncated noise; (configs, eps, log p(eps))."""
         sigma = self.control_sigma()
         k = len(controls)
+        active = self.noise_mask(controls)
         if noise and rng is not None and np.any(sigma > 0):
-            eps = truncated_normal(rng, sigma, k, self.truncation)
+            eps = truncated_normal(rng, sigma, k, self.truncation) * active
         else:
             eps = np.zeros((k, len(sigma)))
         configs = np.empty((k + 1, self.dof))
@@ -380,7 +432,23 @@ class _BulletRobot(Robot):
             joints = self.joint_dofs
             q[joints] = np.clip(q[joints], self.lower[joints], self.upper[joints])
             configs[t + 1] = q
-        return configs, eps, truncated_normal_logpdf(eps, sigma, self.truncation)
+        return configs, eps, truncated_normal_logpdf(eps, sigma, self.truncation, active)
+
+    def noise_groups(self) -> list[list[int]]:
+        """Controls that err together: the base's (v, omega or vx, vy, omega), each joint alone."""
+        nb = self.n_base_controls
+        groups = [list(range(nb))] if nb else []
+        return groups + [[nb + i] for i in range(len(self.joint_dofs))]
+
+    def noise_mask(self, controls: np.ndarray) -> np.ndarray:
+        """(k, nc) True where a control error is sampled: every control of a group (the base, a
+        joint) at the steps that command that group to move. A part commanded to stand still
+        does not drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
+        controls = np.asarray(controls, dtype=float).reshape(len(controls), -1)
+        moving = np.abs(controls) > 1e-12
+        for group in self.noise_groups():
+            moving[:, group] = moving[:, group].any(axis=1, keepdims=True)
+        return moving
 
     def execute(
         self,
@@ -469,7 +537,8 @@ class _BulletRobot(Robot):
         return body, mesh
 
     def _place_housing(self, world_T_sensor: Pose) -> None:
-        center = world_T_sensor @ _pose6([0.0, 0.0, -self.sensor_size[2] / 2.0, 0, 0, 0])
+        center = world_T_sensor.copy()
+        center[:3, 3] -= world_T_sensor[:3, 2] * (self.sensor_size[2] / 2.0)  # housing centre behind the origin
         p.resetBasePositionAndOrientation(
             self._housing, center[:3, 3].tolist(), _quat(center[:3, :3]), physicsClientId=self.client
         )
@@ -539,11 +608,15 @@ class _ArmChain:
             p.changeVisualShape(self.body, j, rgbaColor=[0.9, 0.5, 0.1, 1.0], physicsClientId=client)
 
     def set(self, q: Array) -> None:
+        """Set the joints (the robot's cached configuration is then unknown)."""
         for j, v in zip(self.joints, q, strict=True):
             p.resetJointState(self.body, j, float(v), physicsClientId=self.robot.client)
+        self.robot._state = None
 
-    def flange_pose(self, q: Array) -> Pose:
-        self.set(q)
+    def flange_pose(self, q: Array | None = None) -> Pose:
+        """world_T_flange at joints ``q`` (set first) or at the current joints."""
+        if q is not None:
+            self.set(q)
         state = p.getLinkState(self.body, self.flange, computeForwardKinematics=True, physicsClientId=self.robot.client)
         return frame_pose(state[4], state[5])
 
@@ -656,11 +729,12 @@ class Arm(_BulletRobot):
 
     def _set_state(self, q: Array) -> None:
         self.chain.set(q)
-        self._place_housing(self.chain.flange_pose(q) @ self.flange_T_sensor)
+        self._place_housing(self.chain.flange_pose() @ self.flange_T_sensor)
 
     def fk(self, q: Array) -> Pose:
         """world_T_sensor = world_T_flange(q) (pybullet link state) @ flange_T_sensor (mount)."""
-        return self.chain.flange_pose(np.asarray(q, dtype=float)) @ self.flange_T_sensor
+        self.set_config(q)
+        return self.chain.flange_pose() @ self.flange_T_sensor
 
     def ik(
         self,
@@ -755,6 +829,11 @@ class MobileManipulator(_BulletRobot):
         self._sample_part_points()
         self.q = home
 
+    @property
+    def travel_joints(self) -> Array:
+        """Arm configuration for driving (the ``home`` parameter): the base planners tuck to it."""
+        return np.asarray(self.home, dtype=float)
+
     def _set_state(self, q: Array) -> None:
         world_T_base = _planar(q[0], q[1], q[2])
         p.resetBasePositionAndOrientation(
@@ -768,13 +847,12 @@ class MobileManipulator(_BulletRobot):
             self.chain.body, arm[:3, 3].tolist(), _quat(arm[:3, :3]), physicsClientId=self.client
         )
         self.chain.set(q[3:])
-        self._place_housing(self.chain.flange_pose(q[3:]) @ self.flange_T_sensor)
+        self._place_housing(self.chain.flange_pose() @ self.flange_T_sensor)
 
     def fk(self, q: Array) -> Pose:
         """world_T_sensor: planar base pose, arm mount, pybullet arm FK, sensor mount."""
-        q = np.asarray(q, dtype=float)
         self.set_config(q)
-        return self.chain.flange_pose(q[3:]) @ self.flange_T_sensor
+        return self.chain.flange_pose() @ self.flange_T_sensor
 
     def ik(
         self,
@@ -997,6 +1075,10 @@ class FreeFlyer(_BulletRobot):
 
     def control_sigma(self) -> Array:
         return np.array([self.sigma_position] * 3 + [self.sigma_rotation] * 3)
+
+    def noise_groups(self) -> list[list[int]]:
+        """The translational and the rotational velocity err as vectors."""
+        return [[0, 1, 2], [3, 4, 5]]
 
     def fk(self, q: Array) -> Pose:
         pose = np.eye(4)

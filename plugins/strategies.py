@@ -123,9 +123,24 @@ IROS = [
                   "boundary_hole", "information_gain", "coverage_target", {}, {}, dict(IROS_TARGET)),
 ]
 
+class VasquezEU:
+    """Vasquez-Gomez expected utility (Algorithm 1, k noisy rollouts) of pos reg sur dist over random views."""
+
+    kind = "strategy"
+    name = "vasquez/eu"
+    params = (Param("k", int, 100, "", "rollouts per candidate (Eq. 18: k >= 90 for alpha 0.01, gamma 0.05)",
+                    low=1),) + OVERRIDES
+    parts = ("random", "expected_utility", "unknown_below")
+
+    def __init__(self, k: int, generator_params: dict, utility_params: dict, termination_params: dict) -> None:
+        self.strategy = Strategy(self.name, *self.parts, {"count": 40, **generator_params},
+                                 {"base": "area_factor", "k": int(k), **utility_params}, dict(termination_params))
+
+
 EXTRA = [
     make_strategy("vasquez/du", "Vasquez-Gomez deterministic utility (pos reg sur dist) over random views.",
                   "random", "area_factor", "unknown_below", {"count": 40}),
+    VasquezEU,
     make_strategy("random/random", "Random views, random choice (the weakest baseline).",
                   "random", "random", "max_scans"),
 ]

@@ -118,3 +118,70 @@ def test_kinodynamic_base_plan_gives_controls_that_reach_the_goal(registry) -> N
         assert np.linalg.norm(run.final[:3] - goal[:3]) < 0.1 * np.sqrt(3) and abs(run.final[3] - goal[3]) < 1e-6
         noisy = robot.execute(plan, np.random.default_rng(1))
         assert not np.allclose(noisy.final[:3], plan.path[-1][:3])
+
+
+def test_only_planners_the_ompl_bindings_have_are_offered(registry) -> None:
+    """No silent substitution: lazy_prm exists only if ompl.geometric binds LazyPRM (2.0.1 does not)."""
+    from ompl import geometric as og
+
+    from explore.errors import BadInput
+    from explore.motion import control_planner_names, geometric_planner_names, planner_class
+
+    names = registry.names("motion_planner")
+    assert ("lazy_prm" in names) == hasattr(og, "LazyPRM")
+    if not hasattr(og, "LazyPRM"):
+        with pytest.raises(ValueError, match="LazyPRM"):
+            planner_class("LazyPRM")
+        with pytest.raises(BadInput):
+            registry.create("motion_planner", "ompl", {"planner": "LazyPRM"}, "<test>")
+    assert {"RRTConnect", "PRM", "BITstar", "KPIECE1"} <= set(geometric_planner_names())
+    assert planner_class("prm") is og.PRM and planner_class("rrt_connect") is og.RRTConnect
+    choices = next(p.choices for p in registry.get("motion_planner", "kinodynamic").params if p.name == "planner")
+    assert set(choices) == set(control_planner_names()) and "rrt" in choices
+
+
+def _wrapped(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+@pytest.mark.parametrize("name", ["kinodynamic", "tuck_and_drive"])
+def test_mobile_manipulator_drives_around_the_furniture(registry, name) -> None:
+    """Cluttered: tuck the arm, drive past chair_1 to the far side, untuck; executed without noise
+    the controls reach the goal (the gap closed by the steering) without touching the true world."""
+    from explore.pvs import PVS
+
+    with Simulation("cluttered", registry) as sim:
+        robot = sim.robot
+        pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.02)  # the bunny's box: unknown
+        problem = MotionProblem(robot, space_free=pvs.is_free)
+        start, goal = robot.q.copy(), robot.q.copy()
+        goal[:3] = (1.5, 1.2, 3.0)
+        goal[3:] += 0.2
+        planner = registry.get("motion_planner", name).create({"time_limit": 20.0})
+        plan = planner.plan(problem, start, goal, seed=3)
+        assert plan is not None and plan.controls is not None and plan.exact
+        assert np.allclose(plan.path[-1][3:], goal[3:], atol=1e-9)
+        tucked = np.flatnonzero(np.all(np.abs(plan.path[:, 3:] - robot.travel_joints) < 1e-9, axis=1))
+        moving = np.flatnonzero(np.any(np.abs(np.diff(plan.path[:, :2], axis=0)) > 1e-12, axis=1))
+        assert set(moving) <= set(tucked)  # the base moves only with the arm tucked
+        run = robot.execute(plan, noise=False, world="true")
+        assert not run.collided
+        assert np.allclose(run.final[:2], goal[:2], atol=1e-6) and abs(_wrapped(run.final[2] - goal[2])) < 1e-6
+
+
+def test_geometric_planner_checks_the_turn_drive_turn_a_differential_base_drives(registry) -> None:
+    """Base-only problem (arm pinned): every returned segment is valid as the base executes it."""
+    with Simulation("cluttered", registry) as sim:
+        robot = sim.robot
+        start = robot.q.copy()
+        problem = MotionProblem(robot).pinned(robot.joint_dofs, start)
+        goal = start.copy()
+        goal[:3] = (1.5, 1.2, 3.0)
+        plan = registry.get("motion_planner", "rrt_connect").create({"time_limit": 20.0}).plan(
+            problem, start, goal, seed=4)
+        assert plan is not None
+        executed = problem.motion_path(plan.path)
+        assert len(executed) > len(plan.path)  # turns inserted
+        assert validate_path(problem, executed, resolution=problem.resolution, margin=0.0) is None
+        run = robot.execute(plan, noise=False, world="true")
+        assert not run.collided and np.allclose(run.final, goal, atol=1e-6)

@@ -103,23 +103,142 @@ def test_expected_utility_weights_by_probability(cluttered) -> None:
 
 def test_filter_pipeline_counts_are_monotone(registry) -> None:
     with Simulation("cluttered", registry) as sim:
-        session = NBVSSession(sim, registry, expected=True, k=10, n_samples=20000, seed=0, top=5)
+        session = NBVSSession(sim, registry, expected=True, k=10, n_samples=2000, seed=0, top=5)
         session.initial()
-        states = session.score(session.plan(session.filter(session.sample())))
+        sampled = session.sample()
+        # n_samples states whose director ray hits the region, drawn uniformly (~1 % of the draws)
+        assert session.stages["ray_hits"] == len(sampled) == 2000 and session.stages["sampled"] > 50 * 2000
+        for state in sampled[::97]:  # the grouped FK (base pose @ arm FK) is the robot's FK
+            assert np.allclose(state.pose, sim.robot.fk(state.q), atol=1e-6)  # pybullet works in float32
+            axis = state.pose[:3, 2]
+            t = np.linspace(0.0, sim.sensor.max_range, 3000)[:, None]
+            along = state.pose[:3, 3] + t * axis
+            assert np.any(np.all((along >= session.region_min - 1e-3) & (along <= session.region_max + 1e-3), axis=1))
+        states = session.score(session.plan(session.filter(sampled)))
         counts = [session.stages[name] for name in STAGES]
-        assert counts[0] == 20000 and counts[1] > 0
-        assert all(a >= b for a, b in zip(counts[:-1], counts[1:], strict=True)), counts
+        assert all(a >= b for a, b in zip(counts[1:-1], counts[2:], strict=True)), counts
         assert len(states) == session.stages["planned"] <= 5
         for state in states:
             assert state.plan is not None and state.plan.controls is not None
             assert state.reg == 1.0 and state.occ / (state.occ + state.unk) > 0.5  # Eq. 5, h = 0.5
+            assert state.unk >= session.min_unknown
 
 
 def test_two_view_nbvs_run_increases_coverage(registry) -> None:
     with Simulation("cluttered", registry) as sim:
-        session = NBVSSession(sim, registry, expected=True, k=20, n_samples=20000, seed=0, max_views=2, top=8)
+        # the paper's DU row (no noise): the views land where they were chosen
+        session = NBVSSession(sim, registry, expected=False, n_samples=2000, seed=0, max_views=2, top=8,
+                              noise=False)
         summary = session.run()
         coverage = summary["coverage"]
         assert summary["views"] == 3, summary["reason"]  # the initial scan + 2 planned views
         assert coverage[-1] > coverage[0] > 0.0
         assert summary["collisions"] == 0
+
+
+def test_log_probability_is_the_truncated_normal_density() -> None:
+    """log P (Eq. 2-3) = sum of scipy's truncated-normal log densities over the sampled errors."""
+    from scipy.stats import truncnorm
+
+    from explore.motion import truncated_normal, truncated_normal_logpdf
+
+    sigma = np.array([1.65e-3, 0.28, 0.0])
+    eps = truncated_normal(np.random.default_rng(3), sigma, 40)
+    eps[:, 2] = 0.0
+    active = np.ones_like(eps, dtype=bool)
+    active[:10] = False  # e.g. the base stands still while the arm moves
+    expected = sum(truncnorm.logpdf(eps[10:, j], -3, 3, scale=sigma[j]).sum() for j in range(2))
+    assert truncated_normal_logpdf(eps, sigma, 3.0, active) == pytest.approx(expected, rel=1e-9)
+    assert truncated_normal_logpdf(eps, sigma) == pytest.approx(
+        sum(truncnorm.logpdf(eps[:, j], -3, 3, scale=sigma[j]).sum() for j in range(2)), rel=1e-9)
+
+
+def test_expected_utility_weights_and_effective_sample_size(cluttered) -> None:
+    """Algorithm 1's weights are eta P_i (ESS below k); ``mean`` weights give ESS = k."""
+    robot = cluttered.robot
+    plan = MotionPlan(_drive_past_chair(robot, 1.0))
+    field = ObstacleField.from_sim(cluttered)
+
+    def utility(samples: StateSamples) -> np.ndarray:
+        return samples.configs[:, 1]
+
+    paper = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field)
+    flat = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field,
+                            weighting="mean")
+    assert flat.ess == pytest.approx(40.0) and flat.value == pytest.approx(float(flat.utilities.mean()))
+    assert 1.0 <= paper.ess < 40.0
+    assert paper.ess == pytest.approx(1.0 / np.sum(paper.weights**2))
+    assert np.array_equal(paper.utilities, flat.utilities)
+
+
+def _free_flyer_context(sim, registry):
+    from explore.candidates import PlanningContext
+    from explore.pvs import PVS
+    from explore.visibility import VoxelGrid
+
+    pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
+    prob = (1.0 / (1.0 + np.exp(-pvs.log_odds.astype(np.float64)))).astype(np.float32)
+    grid = VoxelGrid(prob, np.asarray(pvs.origin, dtype=float), float(pvs.resolution))
+    return PlanningContext(pvs=pvs, surface=None, grid=grid, sensor=sim.sensor, robot=sim.robot,
+                           region_min=np.asarray(sim.spec.region_min), region_max=np.asarray(sim.spec.region_max),
+                           environment_boxes=[tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object],
+                           rng=np.random.default_rng(0))
+
+
+def test_expected_utility_plugin_wraps_any_utility(registry) -> None:
+    """Without noise EU equals the wrapped utility; with noise a path 5 mm from the pedestal scores 0."""
+    from explore.candidates import Candidate
+    from explore.geometry import look_at
+
+    with Simulation("bunny_pedestal", registry) as sim:
+        robot = sim.robot
+        ctx = _free_flyer_context(sim, registry)
+        base = registry.create("utility", "unknown_count", {}, "<test>")
+        eu = registry.create("utility", "expected_utility", {"base": "unknown_count", "k": 30}, "<test>")
+        bunny = np.array([0.0, 0.0, 0.6])
+
+        def view(x: float, y: float) -> np.ndarray:
+            return look_at([x, y, 0.3], bunny)
+
+        robot.q = robot.ik(view(0.085, -0.3))  # sphere (r 3 cm) 3.5 cm from the pedestal face x = 0.05
+        near, far = Candidate(view(0.085, 0.3), "test"), Candidate(view(0.4, 0.3), "test")
+        plain = base.score([near, far], ctx)
+        assert np.all(plain > 0)
+        assert np.allclose(eu.score([near, far], ctx), plain, rtol=1e-12)  # no noise: every sample is nominal
+        robot.sigma_position = 0.02  # m/s per axis: ~1 cm spread after the 6 s drive
+        scored = eu.score([near, far], ctx)
+        assert scored[0] == 0.0 and near.diagnostics["eu_feasible"] == 0.0
+        assert scored[1] > 0.0 and far.diagnostics["eu_feasible"] == 1.0
+        assert scored[1] == pytest.approx(plain[1], rel=0.5)  # the samples see about what the nominal sees
+
+
+@pytest.mark.slow
+def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
+    """trees/nbvs_mobile.yaml with vasquez/eu: the first scan and two planned views, executed
+    without noise (EU still scores with the noise model), with the metrics and pictures."""
+    import json
+
+    from explore.run import RunConfig, execute
+    from explore.trees import load_tree
+
+    tree = load_tree("nbvs_mobile", registry)
+    assert {n.behaviour for n in tree.root.walk() if n.behaviour} >= {
+        "start_nbvs", "nbvs_sample_states", "nbvs_filter", "nbvs_plan", "nbvs_score", "nbvs_select",
+        "nbvs_execute", "nbvs_acquire", "nbvs_integrate", "nbvs_check_termination"}
+    settings = {"start_nbvs.n_samples": 800, "start_nbvs.top": 6, "start_nbvs.noise": False, "strategy.k": 10}
+    config = RunConfig(tree="nbvs_mobile", world="cluttered", strategy="vasquez/eu", seed=0, max_scans=2,
+                       settings=settings, out=tmp_path / "run")
+    result = execute(config, registry)
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert result.status == "success", result.reason
+    assert metrics["expected_utility"] and metrics["k"] == 10 and metrics["strategy"] == "vasquez/eu"
+    assert 2 <= metrics["scans"] <= 3 and metrics["trajectories"] == metrics["scans"] - 1
+    assert metrics["collisions"] == 0
+    coverage = metrics["coverage_per_scan"]
+    assert len(coverage) == metrics["scans"] and coverage[-1] > coverage[0] > 0.0
+    assert all(b >= a for a, b in zip(coverage, coverage[1:], strict=False))
+    assert metrics["planning"]["queries"] >= 6 and metrics["planning"]["success_rate"] > 0.0
+    assert metrics["path_length"] > 0.0 and metrics["path_length_m"] > 0.0
+    assert len(metrics["ess_per_move"]) == metrics["trajectories"]
+    for name in ("trajectories.png", "coverage.png", "pvs.npz", "points.ply", "trace.jsonl"):
+        assert (tmp_path / "run" / name).stat().st_size > 0

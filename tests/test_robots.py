@@ -141,3 +141,77 @@ def test_execution_records_collisions_with_the_true_world_only(registry) -> None
         assert run.collided and "bunny" in run.collisions[0].bodies
         known = robot.execute(MotionPlan(np.vstack([a, b])), np.random.default_rng(0), world="known")
         assert not known.collided and np.allclose(known.final, b)
+
+
+def _through_the_bunny(robot) -> MotionPlan:
+    a = robot.ik(look_at([-0.3, 0.0, 0.62], [0.0, 0.0, 0.6]))
+    b = robot.ik(look_at([0.3, 0.0, 0.62], [0.6, 0.0, 0.6]))
+    return MotionPlan(np.vstack([a, b]))
+
+
+def test_on_collision_stop_ends_the_motion_continue_records_every_step(bunny_sim) -> None:
+    robot = bunny_sim.robot
+    plan = _through_the_bunny(robot)
+    robot.on_collision = "stop"
+    stopped = robot.execute(plan, noise=False)
+    robot.on_collision = "continue"
+    kept = robot.execute(plan, noise=False)
+    assert not stopped.completed and len(stopped.collisions) == 1
+    first = stopped.collisions[0]
+    assert len(stopped.configs) == first.step + 1 and np.allclose(stopped.final, first.config)
+    assert kept.completed and np.allclose(kept.final, plan.path[-1])
+    steps = [e.step for e in kept.collisions]
+    assert steps[0] == first.step and len(steps) > 3 and steps == sorted(set(steps))  # one event per step
+    assert all("bunny" in e.bodies for e in kept.collisions)  # the sphere passes through the bunny only
+
+
+def test_execute_samples_the_noise_model(two_tables) -> None:
+    """Through ``execute``: errors within 3 sigma with the truncated std, none while the base
+    stands still (the pan-tilt head moves alone first), log P as the model, heading spread."""
+    from explore.motion import truncated_normal_logpdf
+
+    robot = two_tables.robot
+    start = robot.q.copy()
+    turned = start.copy()
+    turned[3] = 0.6  # pan only: the base is commanded to stand still
+    goal = turned.copy()
+    goal[0] += 0.6
+    plan = MotionPlan(np.vstack([start, turned, goal]))
+    sigma = robot.control_sigma()
+    runs = [robot.execute(plan, np.random.default_rng(seed), noise=True, world="none") for seed in range(150)]
+    mask = robot.noise_mask(runs[0].controls)
+    still = ~mask[:, 0]
+    assert still.sum() > 10 and mask[:, 0].sum() > 10
+    eps = np.vstack([r.noise for r in runs])
+    active = np.vstack([mask] * len(runs))
+    assert not np.any(eps[~active]) and np.all(np.abs(eps) <= 3 * sigma + 1e-12)
+    used = sigma > 0
+    moving = eps[active[:, 0]][:, used]
+    assert np.allclose(moving.std(axis=0), 0.9866 * sigma[used], rtol=0.05)  # std of a normal cut at 3 sigma
+    for run in runs[:5]:
+        assert run.log_prob == pytest.approx(truncated_normal_logpdf(run.noise, sigma, robot.truncation, mask))
+    heading = np.array([r.final[2] for r in runs]) - goal[2]
+    expected = 0.9866 * sigma[2] * robot.dt * math.sqrt(mask[:, 0].sum())
+    assert abs(heading.std() / expected - 1.0) < 0.15
+    assert np.allclose(robot.execute(plan, noise=False, world="none").final, goal, atol=1e-9)
+
+
+def test_differential_base_turns_drives_turns_symmetrically(registry) -> None:
+    """The executed path of a -> b is that of b -> a reversed (OMPL's bidirectional planners need it)."""
+    with Simulation("cluttered", registry) as sim:
+        robot = sim.robot
+        a = robot.q.copy()
+        b = a.copy()
+        b[:3] = (a[0] - 0.5, a[1] + 0.4, a[2] + 2.5)
+        b[3:] = a[3:] + 0.3
+        forward = robot.execution_path(np.vstack([a, b]))
+        backward = robot.execution_path(np.vstack([b, a]))
+        assert len(forward) == 4 and np.allclose(forward, backward[::-1])
+        heading = forward[1, 2]
+        assert np.allclose(forward[1, :2], a[:2]) and np.allclose(forward[2, :2], b[:2])  # turn in place, drive
+        assert forward[2, 2] == heading  # the drive keeps the heading ...
+        d = b[:2] - a[:2]
+        assert abs(abs(math.sin(heading - math.atan2(d[1], d[0])))) < 1e-9  # ... along the segment
+        controls, rolled = robot.controls_from_path(np.vstack([a, b]))
+        assert np.allclose(rolled[-1], b, atol=1e-9)
+        assert np.allclose(controls[:, 1][np.abs(controls[:, 0]) > 1e-9], 0.0)  # no turning while driving

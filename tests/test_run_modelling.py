@@ -94,12 +94,12 @@ def test_arm_run_plans_with_ompl(tmp_path, capsys) -> None:
 
 @pytest.mark.slow
 def test_positioning_noise_collision_stops_or_is_recorded(tmp_path, capsys) -> None:
-    """Mobile manipulator with Vasquez-Gomez noise: its first approach drifts into a chair.
+    """Mobile manipulator with strong heading noise (sigma_w 1 rad/s): its first approach drifts into a chair.
 
     With the robot's default ``on_collision: stop`` the mission fails (exit 1, reason in the
     metrics); with ``continue`` the collision is recorded and the run goes on.
     """
-    args = ["model_object", "--world", "cluttered", "--max-scans", "1"]
+    args = ["model_object", "--world", "cluttered", "--max-scans", "1", "--set", "robot.sigma_w=1.0"]
     code, stop, _ = _run([*args, "--out", str(tmp_path / "stop")], capsys)
     assert code == 1 and stop["status"] == "failure"
     assert stop["reason"] == "Move to initial scan: collision with chair_1 during the approach motion of scan 1"
