@@ -654,54 +654,60 @@ def pose_graph_from_scans(
 
 
 class LikelihoodField:
-    """A 2-D likelihood field of map points (Thrun's beam-endpoint model, as AMCL's) for
+    """A likelihood field of map points (Thrun's beam-endpoint model, as AMCL's) for
     correlative scan matching (Olson 2009): brute-force search over x, y and yaw of how well a
-    view's points land on the map, to localise a base whose odometry is off by tens of cm."""
+    view's points land on the map. The field is 3-D: an object standing on a table must not
+    score on the table's edge below it, which a 2-D projection lets it do."""
 
-    def __init__(self, points: Points3, resolution: float = 0.02, sigma: float = 0.05, margin: float = 1.0) -> None:
+    def __init__(self, points: Points3, resolution: float = 0.02, sigma: float = 0.03, margin: float = 0.2) -> None:
         from scipy.ndimage import distance_transform_edt
 
-        xy = _as_points(points, "map points")[:, :2]
+        xyz = _as_points(points, "map points")
         self.resolution = float(resolution)
-        self.origin = xy.min(axis=0) - margin
-        shape = np.ceil((xy.max(axis=0) + margin - self.origin) / self.resolution).astype(int) + 1
+        self.origin = xyz.min(axis=0) - margin
+        shape = np.ceil((xyz.max(axis=0) + margin - self.origin) / self.resolution).astype(int) + 1
         occupied = np.zeros(shape, dtype=bool)
-        cells = np.floor((xy - self.origin) / self.resolution).astype(int)
-        occupied[cells[:, 0], cells[:, 1]] = True
+        cells = np.floor((xyz - self.origin) / self.resolution).astype(int)
+        occupied[cells[:, 0], cells[:, 1], cells[:, 2]] = True
         distance = distance_transform_edt(~occupied) * self.resolution
-        self.field = np.exp(-0.5 * (distance / sigma) ** 2)
+        self.field = np.exp(-0.5 * (distance / sigma) ** 2).astype(np.float32)
 
-    def score(self, xy: Array) -> Array:
-        """Mean likelihood of point sets (..., n, 2); points off the map count zero."""
-        cells = np.floor((xy - self.origin) / self.resolution).astype(int)
-        inside = np.all((cells >= 0) & (cells < np.array(self.field.shape)), axis=-1)
-        values = self.field[np.clip(cells[..., 0], 0, self.field.shape[0] - 1),
-                            np.clip(cells[..., 1], 0, self.field.shape[1] - 1)]
+    def score(self, xyz: Array) -> Array:
+        """Mean likelihood of point sets (..., n, 3); points off the map count zero."""
+        cells = np.floor((xyz - self.origin) / self.resolution).astype(int)
+        shape = np.array(self.field.shape)
+        inside = np.all((cells >= 0) & (cells < shape), axis=-1)
+        cells = np.clip(cells, 0, shape - 1)
+        values = self.field[cells[..., 0], cells[..., 1], cells[..., 2]]
         return np.where(inside, values, 0.0).mean(axis=-1)
 
-    def match(self, xy: Array, pivot: Array, search: float = 0.8, search_yaw: float = math.radians(20.0),
+    def match(self, xyz: Array, pivot: Array, search: float = 0.15, search_yaw: float = math.radians(4.0),
               points: int = 400) -> tuple[Pose, float]:
-        """Best planar motion (about ``pivot``) of the points ``xy`` onto the map, and its score.
+        """Best planar motion (x, y, yaw about the vertical through ``pivot``) of the points
+        ``xyz`` onto the map, and its score.
 
-        Coarse to fine: 8 cm / 2 deg steps over the search window, then 2 cm / 0.5 deg around
+        Coarse to fine: 4 cm / 1 deg steps over the search window, then 1 cm / 0.25 deg around
         the best; at most ``points`` points (evenly picked) are scored.
         """
-        xy = np.asarray(xy, dtype=float)
-        xy = xy[np.linspace(0, len(xy) - 1, min(points, len(xy))).astype(int)]
-        pivot = np.asarray(pivot, dtype=float)
+        xyz = np.asarray(xyz, dtype=float)
+        xyz = xyz[np.linspace(0, len(xyz) - 1, min(points, len(xyz))).astype(int)]
+        pivot = np.asarray(pivot, dtype=float)[:2]
         best = (-1.0, 0.0, np.zeros(2))
-        for half, step, half_yaw, step_yaw in ((search, 0.08, search_yaw, math.radians(2.0)),
-                                               (0.08, 0.02, math.radians(2.0), math.radians(0.5))):
+        for half, step, half_yaw, step_yaw in ((search, 0.04, search_yaw, math.radians(1.0)),
+                                               (0.04, 0.01, math.radians(1.0), math.radians(0.25))):
             offsets = np.arange(-half, half + 1e-9, step)
-            grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 1, 2) + best[2]
+            shifts = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2) + best[2]
+            grid = np.zeros((len(shifts), 1, 3))
+            grid[:, 0, :2] = shifts
             centre_yaw = best[1]
             for yaw in centre_yaw + np.arange(-half_yaw, half_yaw + 1e-9, step_yaw):
                 c, s = math.cos(yaw), math.sin(yaw)
-                turned = (xy - pivot) @ np.array([[c, s], [-s, c]]) + pivot
+                turned = xyz.copy()
+                turned[:, :2] = (xyz[:, :2] - pivot) @ np.array([[c, s], [-s, c]]) + pivot
                 scores = self.score(turned[None] + grid)
                 k = int(np.argmax(scores))
                 if scores[k] > best[0]:
-                    best = (float(scores[k]), float(yaw), grid[k, 0].copy())
+                    best = (float(scores[k]), float(yaw), shifts[k].copy())
         score, yaw, shift = best
         out = _turn_about(np.array([*pivot, 0.0]), np.array([0.0, 0.0, 1.0]), yaw)
         out[:2, 3] += shift
@@ -723,6 +729,15 @@ def _within(transform: Pose, prediction: Pose, gate: tuple[float, float]) -> boo
     return t_err <= gate[0] and r_err <= gate[1]
 
 
+def _moves_within(correction: Pose, pose: Pose, gate: tuple[float, float]) -> bool:
+    """True if a world-frame ``correction`` moves ``pose`` by at most ``gate`` (m, rad).
+
+    Measured at the pose, not at the world origin: a turn of a few degrees about a sensor a
+    metre from the origin is a large translation of the world frame but none of the sensor.
+    """
+    return _within(_as_pose(correction) @ pose, pose, gate)
+
+
 class IncrementalPoseGraph:
     """The pose graph of :func:`pose_graph_from_scans`, grown one scan at a time.
 
@@ -738,21 +753,24 @@ class IncrementalPoseGraph:
     edges come from Görner's Plane ICP instead: the views' points higher than ``min_height``
     above that plane on upright surfaces, in world coordinates at the estimated poses, are
     aligned in x, y and yaw only (z, roll and pitch of a base on a floor are known), starting
+    first against the points of *all* earlier views at their estimates (scan to local map),
     from ``2 yaw_starts + 1`` turns ``yaw_step`` apart about the view (a base's odometry can be
     off by many degrees: Vasquez-Gomez's sigma_omega = 0.28 rad/s gives ~7 deg per move); the
-    best fit wins and the gate widens to the searched range. Loop closures start from the
-    graph's estimate after the sequential edge (accurate to about a degree), once, and must
-    stay within ``loop_gate`` of it: a loop that converged elsewhere (a far overview and a
-    close view share few edges) would otherwise pull a whole chain.
+    best fit wins if it moves the view by no more than the gate, which widens to the searched
+    range. That estimate (accurate to about a degree) seeds the sequential edge and the loop
+    closures, each one Plane ICP run that must stay within ``loop_gate`` of it: an edge that
+    converged elsewhere (a far overview and a close view share few edges) would otherwise
+    pull a whole chain. Gates are measured at the sensor, not at the world origin.
 
     With ``reference`` (points on the upright surfaces of the known environment -- walls,
     table edges and legs -- in world coordinates: the map Görner's robot localises in with
-    AMCL) every scan is also localised in the map: a correlative search over +-0.8 m and
-    +-20 deg on the map's likelihood field (:class:`LikelihoodField`), then Plane ICP against
-    the map points; a fit of at least ``min_reference_fit`` adds an absolute pose factor, so
-    the graph is held in the world and not only at its first scan. Its default sigmas trust
-    the map's heading (1 deg) more than its position (0.1 m): with one table edge in view the
-    2-D match slides along that edge.
+    AMCL) every scan whose points lie near the map is also localised in it: a correlative
+    search within ``reference_search`` of the graph's estimate on the map's 3-D likelihood
+    field (:class:`LikelihoodField`), then Plane ICP against the map points; a fit of at
+    least ``min_reference_fit`` adds an absolute pose factor, so the graph is held in the
+    world and not only at its first scan. The search is narrow because a table is symmetric
+    (its front edge fits its back edge). The default sigmas trust the map's heading (1 deg)
+    more than its position (0.1 m): with one table edge in view the match slides along it.
     """
 
     def __init__(
@@ -775,6 +793,7 @@ class IncrementalPoseGraph:
         reference: Points3 | None = None,
         reference_sigmas: Any = sigmas6(math.radians(1.0), 0.1),
         min_reference_fit: float = 0.3,
+        reference_search: tuple[float, float] = (0.15, math.radians(4.0)),
     ) -> None:
         self.graph = PoseGraph(robust=robust, robust_k=robust_k)
         self.gate = gate
@@ -791,6 +810,8 @@ class IncrementalPoseGraph:
         self.field = None if self.reference is None else LikelihoodField(self.reference)
         self.reference_sigmas = reference_sigmas
         self.min_reference_fit = float(min_reference_fit)
+        self.reference_search = (float(reference_search[0]), float(reference_search[1]))
+        self.mapped = False  # the newest node's estimate came from Plane ICP against the earlier views
         self.localised: list[int] = []  # nodes with an absolute factor from the reference
         self.odometry_sigmas = odometry_sigmas
         self.prior_sigmas = prior_sigmas
@@ -838,9 +859,13 @@ class IncrementalPoseGraph:
                 self.poses = self.graph.optimize(self.max_iterations)
             return self.poses
         predicted = np.concatenate([self.poses, (self.poses[-1] @ invert(self.believed[-2]) @ believed)[None]])
-        self._localise(i, predicted)
+        self.mapped = False
+        if self.plane is not None:  # multi-start Plane ICP against all earlier views: a start within a degree
+            predicted[i] = self._to_views(i, predicted) @ predicted[i]
         self._link(i - 1, i, predicted, "icp")
         predicted = self.graph.optimize(self.max_iterations)
+        if self._localise(i, predicted):
+            predicted = self.graph.optimize(self.max_iterations)
         down_i = np.asarray(self.pyramids[i][1].points)
         candidates = []
         for j in range(i - 1):
@@ -865,14 +890,24 @@ class IncrementalPoseGraph:
                                         kind=kind, fitness=result.fitness)
 
     def _localise(self, i: int, estimate: np.ndarray) -> bool:
-        """An absolute factor for node ``i``: correlative search on the map's likelihood field,
-        then Plane ICP against the map points; True if the fit is good enough to add."""
+        """An absolute factor for node ``i``: correlative search on the map's 3-D likelihood
+        field within ``reference_search`` (m, rad) of the graph's estimate, then Plane ICP
+        against the map points; True if the fit is good enough to add.
+
+        The window is narrow on purpose: a table is symmetric, and its front edge seen from
+        one side fits its back edge as well; the graph's estimate (views registered to each
+        other) is good to a few cm, so only the map's correction of the slow drift is searched.
+        """
         if self.reference is None or self.plane is None or self.field is None or len(self.points[i]) < 20:
             return False
         src = transform_points(estimate[i], self.points[i])
-        coarse, _ = self.field.match(src[:, :2], estimate[i][:2, 3])
-        result = plane_icp(src, self.reference, self.plane, init=coarse, radius=(0.1, 0.05, 2.0 * self.voxel))
-        if result.fitness < self.min_reference_fit:
+        near = cKDTree(self.reference).query(src, distance_upper_bound=self.reference_search[0])[0]
+        if np.mean(np.isfinite(near)) < self.min_reference_fit:  # the view shows too little of the map
+            return False
+        coarse, _ = self.field.match(src, estimate[i][:2, 3], *self.reference_search)
+        result = plane_icp(src, self.reference, self.plane, init=coarse, radius=(0.05, 2.0 * self.voxel))
+        if result.fitness < self.min_reference_fit or not _moves_within(result.transformation, estimate[i], (
+                self.reference_search[0] + 0.05, self.reference_search[1] + math.radians(1.0))):
             return False
         self.graph.add_prior(i, result.transformation @ estimate[i], self.reference_sigmas)
         self.localised.append(i)
@@ -890,6 +925,23 @@ class IncrementalPoseGraph:
                 result = trial
         assert result is not None
         return result
+
+    def _to_views(self, i: int, estimate: np.ndarray) -> Pose:
+        """Correction (world frame) of node ``i``'s estimate by multi-start Plane ICP of its
+        points against the points of all earlier views at their estimates (scan to local map:
+        more structure than one neighbour, so a wrong turn rarely fits better); identity if the
+        best fit overlaps less than ``min_overlap`` or leaves the gate."""
+        src = transform_points(estimate[i], self.points[i])
+        tgt = np.vstack([transform_points(estimate[j], self.points[j]) for j in range(i)])
+        if len(src) < 20 or len(tgt) < 20:
+            return np.eye(4)
+        keys = np.floor(tgt / self.voxel).astype(np.int64)
+        tgt = tgt[np.unique(keys, axis=0, return_index=True)[1]]
+        result = self._plane_icp(src, tgt, estimate[i], self.yaw_starts)
+        if result.fitness < self.min_overlap or not _moves_within(result.transformation, estimate[i], self.gate):
+            return np.eye(4)
+        self.mapped = True
+        return result.transformation
 
     def _upright_points(self, points: Points3, believed: Pose) -> Points3:
         """The view's points on surfaces standing up from the floor (sensor frame, one per voxel).
@@ -916,10 +968,12 @@ class IncrementalPoseGraph:
         tgt = transform_points(estimate[target], self.points[target])
         if len(src) < 20 or len(tgt) < 20:
             return
-        loop = kind == "loop"  # sequential edges start from odometry, which may be off by many degrees
-        result = self._plane_icp(src, tgt, estimate[source], 0 if loop else self.yaw_starts)
-        gate = self.loop_gate if loop else self.gate
-        if result.fitness < self.min_overlap or not _within(result.transformation, np.eye(4), gate):
+        # edges start from the scan-to-views estimate (or, without one, from odometry, which may be off
+        # by many degrees: then the sequential edge searches yaw itself)
+        local = kind == "loop" or self.mapped
+        result = self._plane_icp(src, tgt, estimate[source], 0 if local else self.yaw_starts)
+        gate = self.loop_gate if local else self.gate
+        if result.fitness < self.min_overlap or not _moves_within(result.transformation, estimate[source], gate):
             return
         measured = invert(estimate[target]) @ result.transformation @ estimate[source]
         self.graph.add_registration(target, source, measured, sigmas=sigmas6(self.edge_sigma / 0.5, self.edge_sigma),
