@@ -480,6 +480,7 @@ class PoseGraph:
     edges: list[Edge] = field(default_factory=list)
     error: tuple[float, float] = (math.nan, math.nan)  # graph error before / after the last optimize()
     _factors: list[Any] = field(default_factory=list, repr=False)
+    _solution: Any = field(default=None, repr=False)  # (graph, values) of the last optimize()
 
     def __len__(self) -> int:
         return len(self.initial)
@@ -543,7 +544,20 @@ class PoseGraph:
         params.setMaxIterations(int(max_iterations))
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         self.error = (graph.error(values), graph.error(result))
+        self._solution = (graph, result)
         return np.stack([result.atPose3(x(i)).matrix() for i in range(len(self.initial))])
+
+    def sigmas(self, index: int) -> Array:
+        """Marginal standard deviations (gtsam ``Pose3`` tangent order, body frame) of node
+        ``index`` at the last :meth:`optimize` solution (the graph linearised there)."""
+        import gtsam
+
+        self._check(index)
+        if self._solution is None:
+            raise RuntimeError("optimize() first")
+        graph, result = self._solution
+        covariance = gtsam.Marginals(graph, result).marginalCovariance(gtsam.symbol_shorthand.X(index))
+        return np.sqrt(np.maximum(np.diag(covariance), 0.0))
 
 
 def rebase_scan(scan: Scan, corrected_pose: Pose) -> Scan:
@@ -686,15 +700,16 @@ class LikelihoodField:
         """Best planar motion (x, y, yaw about the vertical through ``pivot``) of the points
         ``xyz`` onto the map, and its score.
 
-        Coarse to fine: 4 cm / 1 deg steps over the search window, then 1 cm / 0.25 deg around
-        the best; at most ``points`` points (evenly picked) are scored.
+        Coarse to fine: steps of an eighth of the window (at least 4 cm / 1 deg), then 1 cm /
+        0.25 deg around the best; at most ``points`` points (evenly picked) are scored.
         """
         xyz = np.asarray(xyz, dtype=float)
         xyz = xyz[np.linspace(0, len(xyz) - 1, min(points, len(xyz))).astype(int)]
         pivot = np.asarray(pivot, dtype=float)[:2]
         best = (-1.0, 0.0, np.zeros(2))
-        for half, step, half_yaw, step_yaw in ((search, 0.04, search_yaw, math.radians(1.0)),
-                                               (0.04, 0.01, math.radians(1.0), math.radians(0.25))):
+        coarse, coarse_yaw = max(0.04, search / 8.0), max(math.radians(1.0), search_yaw / 8.0)
+        for half, step, half_yaw, step_yaw in ((search, coarse, search_yaw, coarse_yaw),
+                                               (coarse, 0.01, coarse_yaw, math.radians(0.25))):
             offsets = np.arange(-half, half + 1e-9, step)
             shifts = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2) + best[2]
             grid = np.zeros((len(shifts), 1, 3))
@@ -843,8 +858,11 @@ class IncrementalPoseGraph:
             scan, "scan points")
         i = len(self.believed)
         anchor = None
-        if i == 0:  # the first scan anchors the graph (loosely if the map can localise it)
-            anchor = self.odometry_sigmas if self.reference is not None else sigmas6(1e-6, 1e-6)
+        if i == 0:  # the first scan anchors the graph (by the motion since the known start if the map can
+            # localise it)
+            anchor = sigmas6(1e-6, 1e-6)
+            if self.reference is not None:
+                anchor = self.odometry_sigmas if odometry_sigmas is None else odometry_sigmas
         self.graph.add_node(believed, self.prior_sigmas if self.prior_sigmas is not None else anchor)
         if i > 0 and self.prior_sigmas is None:
             sigmas = self.odometry_sigmas if odometry_sigmas is None else odometry_sigmas
@@ -854,17 +872,17 @@ class IncrementalPoseGraph:
         if self.plane is not None:
             self.points.append(self._upright_points(points, believed))
         if i == 0:
-            self.poses = believed[None].copy()
+            self.poses = self.graph.optimize(self.max_iterations)
             if self._localise(0, self.poses):
                 self.poses = self.graph.optimize(self.max_iterations)
             return self.poses
         predicted = np.concatenate([self.poses, (self.poses[-1] @ invert(self.believed[-2]) @ believed)[None]])
         self.mapped = False
         if self.plane is not None:  # multi-start Plane ICP against all earlier views: a start within a degree
-            predicted[i] = self._to_views(i, predicted) @ predicted[i]
+            step = self.odometry_sigmas if odometry_sigmas is None else odometry_sigmas
+            predicted[i] = self._to_views(i, predicted, step) @ predicted[i]
         self._link(i - 1, i, predicted, "icp")
-        predicted = self.graph.optimize(self.max_iterations)
-        if self._localise(i, predicted):
+        if not self.mapped:  # loop closures start from the graph's estimate with the sequential edge
             predicted = self.graph.optimize(self.max_iterations)
         down_i = np.asarray(self.pyramids[i][1].points)
         candidates = []
@@ -876,6 +894,8 @@ class IncrementalPoseGraph:
         for _, j in sorted(candidates, reverse=True)[: self.max_links]:
             self._link(j, i, predicted, "loop")
         self.poses = self.graph.optimize(self.max_iterations)
+        if self._localise(i, self.poses):
+            self.poses = self.graph.optimize(self.max_iterations)
         return self.poses
 
     def _link(self, target: int, source: int, estimate: np.ndarray, kind: str) -> None:
@@ -901,13 +921,16 @@ class IncrementalPoseGraph:
         if self.reference is None or self.plane is None or self.field is None or len(self.points[i]) < 20:
             return False
         src = transform_points(estimate[i], self.points[i])
-        near = cKDTree(self.reference).query(src, distance_upper_bound=self.reference_search[0])[0]
+        sigmas = self.graph.sigmas(i)  # 3 sigma of the estimate, at least reference_search, at most 0.8 m, 20 deg
+        search = (float(np.clip(3.0 * np.linalg.norm(sigmas[3:5]), self.reference_search[0], 0.8)),
+                  float(np.clip(3.0 * sigmas[2], self.reference_search[1], math.radians(20.0))))
+        near = cKDTree(self.reference).query(src, distance_upper_bound=search[0])[0]
         if np.mean(np.isfinite(near)) < self.min_reference_fit:  # the view shows too little of the map
             return False
-        coarse, _ = self.field.match(src, estimate[i][:2, 3], *self.reference_search)
+        coarse, _ = self.field.match(src, estimate[i][:2, 3], *search)
         result = plane_icp(src, self.reference, self.plane, init=coarse, radius=(0.05, 2.0 * self.voxel))
-        if result.fitness < self.min_reference_fit or not _moves_within(result.transformation, estimate[i], (
-                self.reference_search[0] + 0.05, self.reference_search[1] + math.radians(1.0))):
+        if result.fitness < self.min_reference_fit or not _moves_within(
+                result.transformation, estimate[i], (search[0] + 0.05, search[1] + math.radians(1.0))):
             return False
         self.graph.add_prior(i, result.transformation @ estimate[i], self.reference_sigmas)
         self.localised.append(i)
@@ -926,11 +949,18 @@ class IncrementalPoseGraph:
         assert result is not None
         return result
 
-    def _to_views(self, i: int, estimate: np.ndarray) -> Pose:
-        """Correction (world frame) of node ``i``'s estimate by multi-start Plane ICP of its
-        points against the points of all earlier views at their estimates (scan to local map:
-        more structure than one neighbour, so a wrong turn rarely fits better); identity if the
-        best fit overlaps less than ``min_overlap`` or leaves the gate."""
+    def _to_views(self, i: int, estimate: np.ndarray, step_sigmas: Any) -> Pose:
+        """Correction (world frame) of node ``i``'s estimate against the points of all earlier
+        views at their estimates (scan to local map: more structure than one neighbour, so a
+        wrong turn rarely fits better).
+
+        Two kinds of start, the best Plane ICP fit wins: ``2 yaw_starts + 1`` turns about the
+        view, and a correlative search (:class:`LikelihoodField` of the earlier views) within
+        3 sigma of the predicted pose -- the previous node's marginal sigmas grown by
+        ``step_sigmas`` (a bumper stop or a long drive can put odometry off by more than the
+        turns cover). Identity if the best fit overlaps less than ``min_overlap`` or moves the
+        view farther than the searched range.
+        """
         src = transform_points(estimate[i], self.points[i])
         tgt = np.vstack([transform_points(estimate[j], self.points[j]) for j in range(i)])
         if len(src) < 20 or len(tgt) < 20:
@@ -938,7 +968,16 @@ class IncrementalPoseGraph:
         keys = np.floor(tgt / self.voxel).astype(np.int64)
         tgt = tgt[np.unique(keys, axis=0, return_index=True)[1]]
         result = self._plane_icp(src, tgt, estimate[i], self.yaw_starts)
-        if result.fitness < self.min_overlap or not _moves_within(result.transformation, estimate[i], self.gate):
+        sigmas = np.sqrt(self.graph.sigmas(i - 1) ** 2 + np.asarray(step_sigmas, dtype=float) ** 2)
+        search = (float(np.clip(3.0 * np.linalg.norm(sigmas[3:5]), self.gate[0], 1.0)),
+                  float(np.clip(3.0 * sigmas[2], self.gate[1], math.radians(45.0))))
+        coarse, _ = LikelihoodField(tgt, resolution=2.0 * self.voxel, sigma=3.0 * self.voxel).match(
+            src, estimate[i][:2, 3], *search)
+        trial = plane_icp(src, tgt, self.plane, init=coarse, radius=(0.15, 0.05, 2.0 * self.voxel))
+        if (trial.fitness, -trial.rmse) > (result.fitness, -result.rmse):
+            result = trial
+        gate = (search[0] + 0.1, search[1] + math.radians(2.0))
+        if result.fitness < self.min_overlap or not _moves_within(result.transformation, estimate[i], gate):
             return np.eye(4)
         self.mapped = True
         return result.transformation
