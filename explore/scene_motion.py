@@ -76,12 +76,14 @@ class Mover:
     noise : execute with the robot's positioning noise
     occupied_from : PVS probability from which a robot point counts as colliding
     seed : seeds IK restarts and the execution noise
-    planning_time : time limit of one motion plan (s)
+    planning_time : time limit of one motion plan (s); generous, so that the path simplification
+        normally runs to completion: a deadline hit under CPU load changes the path, the noise
+        drawn along it and so the run (the same seed must give the same metrics)
     min_path_fraction : shortest reachable share of a scan path that is still scanned
     """
 
     def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
-                 occupied_from: float = 0.75, seed: int = 0, planning_time: float = 2.0,
+                 occupied_from: float = 0.75, seed: int = 0, planning_time: float = 10.0,
                  min_path_fraction: float = 0.4) -> None:
         self.sim = sim
         self.robot = sim.robot
