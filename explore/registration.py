@@ -921,7 +921,7 @@ class IncrementalPoseGraph:
         if self.reference is None or self.plane is None or self.field is None or len(self.points[i]) < 20:
             return False
         src = transform_points(estimate[i], self.points[i])
-        sigmas = self.graph.sigmas(i)  # 3 sigma of the estimate, at least reference_search, at most 0.8 m, 20 deg
+        sigmas = self._sigmas(i)  # 3 sigma of the estimate, at least reference_search, at most 0.8 m, 20 deg
         search = (float(np.clip(3.0 * np.linalg.norm(sigmas[3:5]), self.reference_search[0], 0.8)),
                   float(np.clip(3.0 * sigmas[2], self.reference_search[1], math.radians(20.0))))
         near = cKDTree(self.reference).query(src, distance_upper_bound=search[0])[0]
@@ -949,6 +949,13 @@ class IncrementalPoseGraph:
         assert result is not None
         return result
 
+    def _sigmas(self, i: int) -> Array:
+        """Node ``i``'s marginal sigmas; if the linearised graph is singular, the gate's third."""
+        try:
+            return self.graph.sigmas(i)
+        except RuntimeError:  # gtsam's IndeterminantLinearSystemException
+            return sigmas6(self.gate[1] / 3.0, self.gate[0] / 3.0)
+
     def _to_views(self, i: int, estimate: np.ndarray, step_sigmas: Any) -> Pose:
         """Correction (world frame) of node ``i``'s estimate against the points of all earlier
         views at their estimates (scan to local map: more structure than one neighbour, so a
@@ -968,7 +975,7 @@ class IncrementalPoseGraph:
         keys = np.floor(tgt / self.voxel).astype(np.int64)
         tgt = tgt[np.unique(keys, axis=0, return_index=True)[1]]
         result = self._plane_icp(src, tgt, estimate[i], self.yaw_starts)
-        sigmas = np.sqrt(self.graph.sigmas(i - 1) ** 2 + np.asarray(step_sigmas, dtype=float) ** 2)
+        sigmas = np.sqrt(self._sigmas(i - 1) ** 2 + np.asarray(step_sigmas, dtype=float) ** 2)
         search = (float(np.clip(3.0 * np.linalg.norm(sigmas[3:5]), self.gate[0], 1.0)),
                   float(np.clip(3.0 * sigmas[2], self.gate[1], math.radians(45.0))))
         coarse, _ = LikelihoodField(tgt, resolution=2.0 * self.voxel, sigma=3.0 * self.voxel).match(
