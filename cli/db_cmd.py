@@ -17,10 +17,10 @@ DbOption = Annotated[
 ]
 
 
-def _open(db: Path | None, create: bool = False):  # -> ObjectDatabase
+def _open(db: Path | None, create: bool = False, readonly: bool = False):  # -> ObjectDatabase
     from explore.database import ObjectDatabase, default_path
 
-    return ObjectDatabase.open(db or default_path(), create=create)
+    return ObjectDatabase.open(db or default_path(), create=create, readonly=readonly)
 
 
 def register(app: typer.Typer) -> None:
@@ -31,14 +31,19 @@ def register(app: typer.Typer) -> None:
         """List the objects: provenance, size, descriptors, where they came from."""
         from .main import console
 
-        with _open(db) as database:
+        with _open(db, readonly=True) as database:
             table = Table(box=None, header_style="bold")
-            for column in ("name", "provenance", "extent [m]", "triangles", "descriptors", "world", "run"):
+            for column in ("name", "provenance", "extent [m]", "triangles", "descriptors", "world", "run", "scans",
+                           "coverage", "last seen"):
                 table.add_column(column)
             for rec in database.records():
+                seen = rec.location or {}
                 table.add_row(
                     rec.name, rec.provenance, str([round(x, 3) for x in rec.extent]), str(rec.triangles),
                     ",".join(rec.descriptor_kinds) or "-", rec.world or "-", rec.run or "-",
+                    "-" if rec.scans is None else str(rec.scans),
+                    "-" if rec.coverage is None else f"{rec.coverage:.2f}",
+                    f"{seen.get('world') or '-'} {seen.get('time', '')}".strip() if seen else "-",
                 )
             console.print(table)
 
@@ -47,7 +52,7 @@ def register(app: typer.Typer) -> None:
         """Print one object's record as JSON."""
         from .main import console
 
-        with _open(db) as database:
+        with _open(db, readonly=True) as database:
             console.print_json(json.dumps(database.get(name, load_mesh=False).summary()))
 
     @sub.command("add")
@@ -57,6 +62,9 @@ def register(app: typer.Typer) -> None:
         scale: Annotated[float, typer.Option("--scale", help="Multiply the vertices (e.g. 0.001 for mm).")] = 1.0,
         provenance: Annotated[str, typer.Option("--provenance", help="given or modelled.")] = "given",
         replace: Annotated[bool, typer.Option("--replace", help="Overwrite an object of the same name.")] = False,
+        descriptors: Annotated[bool, typer.Option(
+            "--descriptors/--no-descriptors", help="Store PPF and VFH descriptors (a few seconds per object).")] = True,
+        world: Annotated[str | None, typer.Option("--world", help="World the object comes from (provenance).")] = None,
         db: DbOption = None,
     ) -> None:
         """Add an object from a mesh file (creates the database if needed)."""
@@ -75,9 +83,19 @@ def register(app: typer.Typer) -> None:
         except (OSError, ValueError) as error:
             raise BadInput(str(mesh), None, f"cannot read the mesh: {error}") from None
         loaded = TriMesh(loaded.vertices * scale, loaded.triangles)
+        stored = {}
         with _open(db, create=True) as database:
-            record = database.add(name, loaded, provenance=provenance, replace=replace)
-            console.print(f"added {record.name} ({record.triangles} triangles) to {database.path}")
+            if name in database and not replace:
+                raise BadInput(str(database.path), name, "an object of this name exists (remove it first)")
+            if descriptors and len(loaded.triangles):
+                from explore.recognition import Model, model_descriptors
+
+                console.print(f"computing descriptors of {name} ...")
+                stored = model_descriptors(Model(name, loaded))
+            record = database.add(name, loaded, provenance=provenance, world=world, replace=replace,
+                                  descriptors=stored)
+            kinds = ", ".join(record.descriptor_kinds) or "no descriptors"
+            console.print(f"added {record.name} ({record.triangles} triangles, {kinds}) to {database.path}")
 
     @sub.command("remove")
     def remove(name: Annotated[str, typer.Argument(help="Object name.")], db: DbOption = None) -> None:
@@ -97,7 +115,7 @@ def register(app: typer.Typer) -> None:
         """Write an object's mesh to a file."""
         from .main import console, out_path
 
-        with _open(db) as database:
+        with _open(db, readonly=True) as database:
             path = database.export(name, out_path(out))
             console.print(f"wrote {path}")
 

@@ -138,21 +138,25 @@ class ObjectDatabase:
 
     # -- opening -------------------------------------------------------------------------
     @classmethod
-    def open(cls, path: str | Path, create: bool = True) -> ObjectDatabase:
+    def open(cls, path: str | Path, create: bool = True, readonly: bool = False) -> ObjectDatabase:
         """Open (and with ``create`` initialise) the database at ``path``.
 
-        Raises BadInput for a missing file (``create=False``), a non-SQLite or corrupted file,
-        a foreign SQLite database or a newer schema; such files are never modified.
+        ``readonly`` opens through a read-only connection and never writes (``explore db
+        list|show|export``): an empty file is then refused instead of getting a schema.
+        Raises BadInput for a missing file (``create=False`` or ``readonly``), a non-SQLite or
+        corrupted file, a foreign SQLite database or a newer schema; such files are never modified.
         """
         path = Path(path).expanduser()
         if path.exists() and path.is_dir():
             raise BadInput(str(path), None, "is a folder, expected an explore object database file")
         if not path.exists():
-            if not create:
+            if not create or readonly:
                 raise BadInput(str(path), None, "no such object database (create one with `explore db add`)")
             path.parent.mkdir(parents=True, exist_ok=True)
         else:
             _validate_existing(path)
+        if readonly:
+            return cls._open_readonly(path)
         try:
             connection = sqlite3.connect(
                 f"{path.resolve().as_uri()}?mode=rwc", uri=True, timeout=BUSY_TIMEOUT_S,
@@ -167,6 +171,27 @@ class ObjectDatabase:
             connection.close()
             raise
         return db
+
+    @classmethod
+    def _open_readonly(cls, path: Path) -> ObjectDatabase:
+        try:
+            connection = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_S,
+                                         isolation_level=None, check_same_thread=False)
+            app = connection.execute("PRAGMA application_id").fetchone()[0]
+            version = connection.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        except sqlite3.Error as error:
+            raise BadInput(str(path), None, f"cannot open the object database: {error}") from None
+        if version == 0 and app == 0 and not tables:
+            connection.close()
+            raise BadInput(str(path), None, "is empty, not an object database yet (`explore db add` creates one);"
+                           " the file was left untouched")
+        try:
+            _check_identity(path, app, version, tables)
+        except BadInput:
+            connection.close()
+            raise
+        return cls(path, connection, path.with_suffix(".meshes"))
 
     def _initialise(self) -> None:
         con = self.connection
@@ -374,14 +399,20 @@ class ObjectDatabase:
 
     def location(self, name: str) -> dict[str, Any] | None:
         """The last recorded location of an object, or None."""
-        row = self.connection.execute(
+        found = self.locations(name, last=True)
+        return found[0] if found else None
+
+    def locations(self, name: str, last: bool = False) -> list[dict[str, Any]]:
+        """Every recorded location of an object, oldest first (``last``: only the newest).
+
+        The first one is where the object was when it was added (its model frame in that world).
+        """
+        rows = self.connection.execute(
             "SELECT l.world, l.pose, l.bbox, l.time FROM locations l JOIN objects o ON o.id = l.object_id"
-            " WHERE o.name = ? ORDER BY l.id DESC LIMIT 1", (name,),
-        ).fetchone()
-        if row is None:
-            return None
-        return {"world": row[0], "pose": json.loads(row[1]), "bbox": json.loads(row[2]) if row[2] else None,
-                "time": row[3]}
+            f" WHERE o.name = ? ORDER BY l.id {'DESC LIMIT 1' if last else 'ASC'}", (name,),
+        ).fetchall()
+        return [{"world": r[0], "pose": json.loads(r[1]), "bbox": json.loads(r[2]) if r[2] else None, "time": r[3]}
+                for r in rows]
 
     # -- recognisers ---------------------------------------------------------------------
     def models(self) -> list[Model]:

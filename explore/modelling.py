@@ -28,7 +28,7 @@ only :meth:`ModellingSession.metrics` reads it, through :mod:`explore.metrics`.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -122,13 +122,18 @@ class ModellingSession:
         the ``free_flyer`` robot
     register_scans : :meth:`step` registers each scan to the model (:meth:`register`, the
         thesis' local ICP) before integrating it, as the ``register_scan`` behaviour does
+    region : (min corner, max corner) of the box to model instead of the world's region (scene
+        exploration models one cluster's box)
+    obstacles : extra (lo, hi) boxes the planning treats as known environment (the rest of the scene)
     """
 
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
                  max_scans: int = 30, planner: Any = None, continue_after_stop: bool = False,
                  pvs_params: dict | None = None, surface_params: dict | None = None,
                  fallback_generator: str | None = None, noise: bool = True, max_plan_attempts: int = 10,
-                 place_first: bool | None = None, register_scans: bool = False) -> None:
+                 place_first: bool | None = None, register_scans: bool = False,
+                 region: tuple[Array, Array] | None = None,
+                 obstacles: Sequence[tuple[Array, Array]] = ()) -> None:
         from .pvs import PVS
         from .surface import SurfaceModel
 
@@ -144,8 +149,9 @@ class ModellingSession:
         self.continue_after_stop = continue_after_stop
         self.sensor = sim.sensor
         self.robot = sim.robot
-        region_min = np.asarray(sim.spec.region_min, dtype=float)
-        region_max = np.asarray(sim.spec.region_max, dtype=float)
+        region_min = np.asarray(sim.spec.region_min if region is None else region[0], dtype=float)
+        region_max = np.asarray(sim.spec.region_max if region is None else region[1], dtype=float)
+        self.obstacles = [(np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)) for lo, hi in obstacles]
         self.pvs = PVS.for_region(region_min, region_max, resolution, **(pvs_params or {}))
         self.surface = SurfaceModel(region_min, region_max, **(surface_params or {}))
         self.stack = CandidateStack()
@@ -182,7 +188,7 @@ class ModellingSession:
     # -- setup helpers -------------------------------------------------------------------
     def _environment_boxes(self) -> list[tuple[Array, Array]]:
         """Boxes of the known static environment (the planner may know it)."""
-        return [tuple(b.mesh.bounds) for b in self.sim.bodies if not b.is_object]
+        return [tuple(b.mesh.bounds) for b in self.sim.bodies if not b.is_object] + list(self.obstacles)
 
     def _snapshot(self) -> VoxelGrid:
         """Dense copy of the PVS with the surface features for the utilities."""
@@ -349,6 +355,15 @@ class ModellingSession:
         ))
         self._new_pending()
         return out
+
+    def integrate_view(self, scan: Scan, sensor_pose: Array, source: str | None = None) -> dict[str, Any]:
+        """Integrate a scan taken outside the session (a scene exploration view) from ``sensor_pose``;
+        it is recorded with ``source``, or with the selected candidate's source when None."""
+        self.scans.append(scan)
+        self.ctx.executed.append(np.asarray(sensor_pose, dtype=float).copy())
+        if source is not None:
+            self._pending.update(source=source, info={"kind": source}, score=float("nan"))
+        return self.integrate(scan)
 
     def generate(self) -> int:
         """Add the generator's candidates to the stack (stale ones are dropped); returns how many.

@@ -147,6 +147,27 @@ class Table:
         return np.all(local @ normals.T - offset <= margin, axis=1)
 
 
+def same_plane(a: Table, b: Table, distance: float, max_angle_deg: float = 5.0) -> bool:
+    """True if two tables lie in one plane: normals within ``max_angle_deg``, heights within ``distance``."""
+    angle = math.degrees(math.acos(min(1.0, abs(float(a.normal @ b.normal)))))
+    return angle <= max_angle_deg and abs(float(b.heights(a.world_T_table[:3, 3][None])[0])) <= distance
+
+
+def merge_tables(a: Table, b: Table | None) -> Table:
+    """``a`` with its hull grown by ``b``'s (both hulls projected into ``a``'s table frame)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if b is None:
+        return a
+    corners = b.hull @ b.world_T_table[:3, :2].T + b.world_T_table[:3, 3]  # b's hull in world coordinates
+    local = np.vstack([a.hull, a.to_table(corners)[:, :2]])
+    try:
+        hull = ConvexHull(local)
+    except QhullError:
+        return a
+    return Table(a.plane, a.world_T_table, local[hull.vertices], a.inliers + b.inliers)
+
+
 @dataclass
 class Cluster:
     """One object candidate: points with normals and where they came from.
@@ -203,6 +224,15 @@ class Cluster:
     def in_view(self, view: int) -> np.ndarray:
         """Mask of the points seen in ``view``."""
         return self.views == view
+
+    def subset(self, mask: np.ndarray) -> Cluster:
+        """The cluster restricted to the points in ``mask`` (same id)."""
+        return Cluster(self.id, self.points[mask], self.normals[mask], self.views[mask], self.beams[mask],
+                       self.up.copy())
+
+    def only_view(self, view: int) -> Cluster:
+        """The points of one view (per-view recognition for multi-view fusion)."""
+        return self.subset(self.in_view(view))
 
     def main_view(self) -> int:
         """The view that contributed most points."""
@@ -294,12 +324,24 @@ class PlaneClusterSegmenter:
     def iterations(self) -> int:
         return ransac_iterations(self.success_probability, self.inlier_fraction)
 
-    def segment(self, scans: Scan | Sequence[Scan] | Cloud, view_ids: Sequence[int] | None = None) -> Segmentation:
-        """Segment one or several scans (their points are fused) into a table and clusters."""
+    def segment(self, scans: Scan | Sequence[Scan] | Cloud, view_ids: Sequence[int] | None = None,
+                table: Table | None = None) -> Segmentation:
+        """Segment one or several scans (their points are fused) into a table and clusters.
+
+        With ``table`` (e.g. the support plane found in earlier views) the plane of this view
+        is still searched, and merged into it (Görner's table tracking: the hull grows) when it
+        is the same plane; a view that sees too little of the table uses ``table`` as it is.
+        """
         cloud = scans if isinstance(scans, Cloud) else Cloud.from_scans(scans, view_ids)
         cloud = cloud.subset(cloud.points[:, 2] >= self.min_plane_height)
         diag: dict[str, Any] = {"points": len(cloud.points), "ransac_iterations": self.iterations}
-        table = self.find_table(cloud.points, diag)
+        found = self.find_table(cloud.points, diag)
+        if table is not None:
+            same = found is not None and same_plane(found, table, 2.0 * self.distance_threshold)
+            diag["table"] = "merged" if same else "kept"
+            table = merge_tables(table, found) if same else table
+        else:
+            table = found
         if table is None:
             return Segmentation(None, [], diag)
         h = table.heights(cloud.points)

@@ -27,6 +27,7 @@ BUILTIN_MODULES = (
     "pose_validators",
     "registrars",
     "behaviours",
+    "scene_behaviours",
     "nbvs_behaviours",
     "executors",
 )

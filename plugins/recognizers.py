@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from explore.params import Param
-from explore.recognition import FPFHRansacRecognizer, PPFRecognizer, VFHRecognizer
+from explore.recognition import Q_H_MIN, FPFHRansacRecognizer, PPFRecognizer, VFHRecognizer
 
 _VERIFY = (
     Param("match_threshold", float, 0.005, "m", "render-and-compare depth tolerance (Eq. 3.10; also 3 sigma)",
@@ -11,6 +11,8 @@ _VERIFY = (
     Param("icp", bool, True, "", "refine each hypothesis with point-to-plane ICP"),
     Param("max_hypotheses", int, 3, "", "hypotheses returned per model", low=1),
     Param("normal_radius", float, 0.01, "m", "normal estimation radius of the model views", low=1e-4),
+    Param("min_q_h", float, Q_H_MIN, "", "accept a hypothesis only if its q_h reaches this (Eq. 3.10)", low=0.0,
+          high=1.0),
 )
 
 
@@ -52,7 +54,7 @@ class VFHMeanDistance(VFHRecognizer):
     """Görner: VFH (308 bins) per view, k = 1 priming, mean distance of the closest 66 % of views < gamma."""
 
     params = (
-        Param("gamma", float, 30.0, "", "mean-distance threshold (our binning; Görner 16.4 with PCL's)", low=0.0),
+        Param("gamma", float, 15.0, "", "mean-distance threshold (our binning; Görner 16.4 with PCL's)", low=0.0),
         Param("keep_fraction", float, 0.66, "", "share of the closest view distances averaged", low=0.01,
               high=1.0),
         Param("training_views", int, 120, "", "rendered training views per model (upper view sphere)", low=1),
@@ -65,6 +67,8 @@ class VFHMeanDistance(VFHRecognizer):
         Param("refine", bool, True, "", "ICP-refine the pose from the best training view"),
         Param("match_threshold", float, 0.005, "m", "render-and-compare depth tolerance", low=1e-4),
         Param("max_hypotheses", int, 3, "", "hypotheses returned", low=1),
+        Param("min_q_h", float, Q_H_MIN, "", "accept a hypothesis only if its q_h reaches this (Eq. 3.10)",
+              low=0.0, high=1.0),
     )
 
 

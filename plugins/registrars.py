@@ -9,6 +9,7 @@ from typing import Any
 from explore.params import Param
 from explore.registration import (
     IcpResult,
+    IncrementalPoseGraph,
     PoseGraphResult,
     icp_local,
     plane_icp,
@@ -99,6 +100,17 @@ class PoseGraphRegistrar(_Configured):
             voxel=self.voxel, edge_sigma=self.edge_sigma, min_overlap=self.min_overlap,
             loop_closures=self.loop_closures, max_loop_closures=self.max_loop_closures,
             robust=self.robust, robust_k=self.robust_k, max_iterations=self.max_iterations,
+        )
+
+    def incremental(self, plane: Any | None = None, reference: Points3 | None = None) -> IncrementalPoseGraph:
+        """An empty pose graph with these parameters that grows one scan at a time; with ``plane``
+        (the floor of a mobile base) its edges come from Plane ICP in x, y, yaw, with
+        ``reference`` (points of the known environment) every scan is also localised in that map."""
+        sigmas = sigmas6(math.radians(self.odometry_sigma_r), self.odometry_sigma_t)
+        return IncrementalPoseGraph(
+            sigmas, sigmas if self.priors == "kinematics" else None, voxel=self.voxel, edge_sigma=self.edge_sigma,
+            min_overlap=self.min_overlap, max_links=min(self.max_loop_closures, 3), robust=self.robust,
+            robust_k=self.robust_k, max_iterations=self.max_iterations, plane=plane, reference=reference,
         )
 
 

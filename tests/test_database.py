@@ -209,3 +209,65 @@ def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("EXPLORE_DB")
     assert main(["db", "add", "cube", str(mesh)]) == 0
     assert (tmp_path / "objects.db").is_file()
+
+
+def test_reading_never_modifies_a_file(tmp_path, capsys):
+    """`db list/show/export` open read-only: an empty file is refused and stays empty (no schema written)."""
+    from explore_cli.main import main
+
+    empty = tmp_path / "empty.db"
+    empty.write_bytes(b"")
+    for argv in (["db", "list", "--db", str(empty)], ["db", "show", "x", "--db", str(empty)],
+                 ["db", "export", "x", str(tmp_path / "x.ply"), "--db", str(empty)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert "is empty" in err and len(err.splitlines()) == 1
+        assert empty.read_bytes() == b""
+    assert not list(tmp_path.glob("empty.db-*")) and not (tmp_path / "empty.meshes").exists()
+    path = tmp_path / "full.db"
+    with ObjectDatabase.open(path) as db:
+        db.add("box", _mesh())
+    before = path.read_bytes()
+    with ObjectDatabase.open(path, readonly=True) as db:
+        assert db.names() == ["box"]
+        with pytest.raises(sqlite3.OperationalError):
+            db.connection.execute("DELETE FROM objects")
+    assert path.read_bytes() == before
+
+
+def test_locations_history(tmp_path):
+    with ObjectDatabase.open(tmp_path / "o.db") as db:
+        db.add("box", _mesh())
+        assert db.locations("box") == [] and db.location("box") is None
+        for x in (0.1, 0.2, 0.3):
+            pose = np.eye(4)
+            pose[0, 3] = x
+            db.set_location("box", "w", pose)
+        assert [loc["pose"][0][3] for loc in db.locations("box")] == [0.1, 0.2, 0.3]
+        assert db.location("box")["pose"][0][3] == 0.3  # last known
+        assert db.locations("box", last=True)[0]["pose"][0][3] == 0.3
+
+
+def test_db_add_stores_descriptors_and_provenance(tmp_path, capsys):
+    """`explore db add` stores the PPF model clouds and VFH signatures a recogniser then reuses."""
+    import open3d as o3d
+    from explore_cli.main import main
+
+    from explore.recognition import PPFRecognizer, VFHRecognizer
+
+    mesh = tmp_path / "box.ply"
+    o3d.io.write_triangle_mesh(str(mesh), _mesh().to_open3d())
+    db = tmp_path / "d.db"
+    assert main(["db", "add", "box", str(mesh), "--world", "lab", "--db", str(db)]) == 0
+    assert "ppf, vfh" in capsys.readouterr().out
+    assert main(["db", "add", "bare", str(mesh), "--no-descriptors", "--db", str(db)]) == 0
+    with ObjectDatabase.open(db, create=False) as database:
+        record = database.get("box")
+        assert record.descriptor_kinds == ("ppf", "vfh") and record.world == "lab" and record.provenance == "given"
+        assert database.get("bare").descriptor_kinds == ()
+        model = next(m for m in database.models() if m.name == "box")
+    ppf = PPFRecognizer()
+    stored = model.descriptors["ppf"][0]
+    assert np.allclose(ppf.table(model).cloud.points, stored[stored[:, 6] > 0.5, :3])  # read, not recomputed
+    vfh = VFHRecognizer()
+    assert np.allclose(vfh.model_data(model).signatures, model.descriptors["vfh"][0][:, :308])

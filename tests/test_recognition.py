@@ -8,11 +8,15 @@ import pytest
 from explore.database import ObjectDatabase
 from explore.geometry import look_at
 from explore.recognition import (
+    Q_H_MIN,
     Hypothesis,
     Model,
     PPFRecognizer,
+    accepted,
+    model_descriptors,
     pose_error,
     render_and_compare,
+    rivals,
     vfh_signature,
 )
 
@@ -76,9 +80,10 @@ def test_local_recognisers_recover_duck_pose(registry, scene, method):
     hypotheses = recognizer.recognize(clusters["duck"], models, scan)
     _check_top(hypotheses, truth, "duck")
     assert hypotheses[0].diagnostics["q_h"] > 0.9
-    # the best wrong model explains the cluster far worse (Eq. 3.10)
+    # the best wrong model explains the cluster far worse (Eq. 3.10) and is not accepted
     best_wrong = max(h.quality for h in hypotheses if h.model != "duck")
     assert best_wrong < 0.5
+    assert {h.model for h in recognizer.accept(hypotheses)} == {"duck"}
 
 
 def test_ppf_ranks_right_model_on_most_clusters(scene):
@@ -121,6 +126,61 @@ def test_vfh_mean_distance_recognises_among_several(registry, scene):
     assert strict.recognize(clusters["duck"], models, scan) == []
 
 
+@pytest.fixture(scope="module")
+def partial(scene):
+    """The realistic case: only the duck and the mug are in the database."""
+    scan, clusters, models, truth = scene
+    return [m for m in models if m.name in ("duck", "mug")]
+
+
+@pytest.mark.parametrize("method", ["ppf", "fpfh_ransac", "vfh_mean_distance"])
+def test_q_h_threshold_rejects_every_wrong_match_with_a_partial_database(registry, scene, partial, method):
+    """The four unknown clusters against {duck, mug}: the recognisers propose wrong models,
+    q_h (Eq. 3.10) >= 0.5 rejects all of them and keeps the right duck match."""
+    scan, clusters, models, truth = scene
+    recognizer = registry.create("recognizer", method)
+    proposed = 0
+    for name, cluster in clusters.items():
+        hypotheses = recognizer.recognize(cluster, partial, scan)
+        kept = recognizer.accept(hypotheses)
+        if name in ("bunny", "teddy", "sorter", "part"):
+            proposed += len(hypotheses)
+            assert kept == [], (name, [(h.model, round(h.q_h, 3)) for h in hypotheses])
+            assert all(h.q_h < 0.3 for h in hypotheses), (name, [(h.model, round(h.q_h, 3)) for h in hypotheses])
+        elif name == "duck":
+            assert kept and kept[0].model == "duck" and kept[0].q_h > 0.9
+            t_err, r_err = pose_error(kept[0].pose, truth["duck"])
+            assert t_err < 0.005 and r_err < 2.0
+    if method != "vfh_mean_distance":
+        assert proposed >= 4  # the local recognisers always propose something: the threshold decides
+    assert accepted([], Q_H_MIN) == []
+
+
+def test_vfh_gamma_says_unknown(registry, scene, partial):
+    """γ = 15 (retuned from Görner's 30 in our binning) rejects most unknown clusters by mean distance alone."""
+    scan, clusters, models, truth = scene
+    recognizer = registry.create("recognizer", "vfh_mean_distance")
+    assert recognizer.gamma == pytest.approx(15.0)
+    by_distance = [name for name in ("bunny", "teddy", "sorter", "part")
+                   if not recognizer.recognize(clusters[name], partial, scan)]
+    assert len(by_distance) >= 2, by_distance
+    loose = registry.create("recognizer", "vfh_mean_distance", {"gamma": 30.0})
+    assert all(loose.recognize(clusters[name], partial, scan) for name in ("bunny", "teddy", "sorter", "part"))
+
+
+def test_mug_with_hidden_handle_is_ambiguous(scene, partial):
+    """From the overview the mug's handle is hidden: two poses explain the cylinder almost equally."""
+    scan, clusters, models, truth = scene
+    hypotheses = PPFRecognizer().recognize(clusters["mug"], partial, scan)
+    kept = accepted(hypotheses)
+    assert kept[0].model == "mug"
+    competing = rivals(kept)
+    assert competing and competing[0].model == "mug"
+    assert competing[0].q_h >= 0.8 * kept[0].q_h
+    assert pose_error(competing[0].pose, kept[0].pose)[1] > 5.0
+    assert rivals(accepted(PPFRecognizer().recognize(clusters["duck"], partial, scan))) == []
+
+
 def test_vfh_signature_shape_and_normalisation():
     rng = np.random.default_rng(0)
     points = rng.normal(size=(500, 3)) * [0.05, 0.05, 0.01]
@@ -133,11 +193,14 @@ def test_vfh_signature_shape_and_normalisation():
         assert 99.0 < signature[45 * k : 45 * (k + 1)].sum() <= 100.0 * 500 / 499 + 1e-6
 
 
-def test_stored_descriptors_are_reused(scene):
+def test_stored_descriptors_are_reused(registry, scene):
     scan, clusters, models, truth = scene
     duck = next(m for m in models if m.name == "duck")
     first = PPFRecognizer()
     array, params = first.describe(duck)
+    plugin = registry.create("recognizer", "ppf")  # the plugin class shadows nothing it needs
+    assert np.array_equal(plugin.describe(duck)[0], array)
+    assert set(model_descriptors(duck, [plugin, registry.create("recognizer", "fpfh_ransac")])) == {"ppf"}
     stored = Model("duck", duck.mesh, {"ppf": (array, params)})
     second = PPFRecognizer()
     table = second.table(stored)
@@ -177,3 +240,22 @@ def test_empty_cluster_and_no_models(scene):
     for recognizer in (PPFRecognizer(), FPFHRansacRecognizer(), VFHRecognizer()):
         assert recognizer.recognize(empty, models, scan) == []
         assert recognizer.recognize(clusters["duck"], [], scan) == []
+
+
+def test_symmetric_poses_are_not_rivals():
+    """A cube turned by 90 deg puts its surface where it was: the same explanation, not an ambiguity."""
+    from scipy.spatial.transform import Rotation
+
+    from explore.meshes import box_mesh
+
+    box = box_mesh(np.array([0.1, 0.1, 0.08]))
+
+    def turned(deg: float, q: float) -> Hypothesis:
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("z", deg, degrees=True).as_matrix()
+        return Hypothesis("box", pose, q, "test", {"q_h": q})
+
+    best, quarter, eighth = turned(0, 0.9), turned(90, 0.88), turned(45, 0.85)
+    assert rivals([best, quarter, eighth]) == [quarter, eighth]
+    assert rivals([best, quarter, eighth], meshes={"box": box}) == [eighth]
+    assert rivals([best, turned(45, 0.5)], meshes={"box": box}) == []  # too weak to compete

@@ -1,0 +1,442 @@
+"""Behaviour plugins of scene exploration (Kriegel thesis Fig. 3.1) and Görner's table patrol.
+
+Thin adapters over :class:`explore.scene.SceneSession`: the session lives in
+``context.state["scene"]`` as a :class:`SceneRun`, which gives the live status line and the
+``metrics.json`` fields. Blackboard keys (in the run's namespace): ``scene`` (the run),
+``unknown`` / ``ambiguous`` (object ids still to explain), ``object`` (the current one in a
+``for_each``), ``object_done`` (its loop ends), ``done`` (the exploration ends), ``explained``
+(every object explained). Long steps are ``blocking`` (worker thread).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from explore.bt_behaviour import ExploreBehaviour, Outcome, failure, success
+from explore.params import Param
+from explore.recognition import Q_H_MIN
+
+
+class SceneRun:
+    """The scene session of a tree run: live statistics and the run's outputs."""
+
+    def __init__(self, session: Any, database: Any) -> None:
+        self.session = session
+        self.database = database
+        self.patrol: dict[str, Any] = {}
+
+    def live_stats(self) -> dict[str, Any]:
+        s = self.session
+        found = s.candidates()
+        stats: dict[str, Any] = {"views": len(s.views), "objects": len(found),
+                                 "explained": sum(o.explained for o in found)}
+        for status in ("ambiguous", "unknown", "modelling"):
+            count = sum(o.status == status for o in found)
+            if count:
+                stats[status] = count
+        return stats
+
+    def run_outputs(self, out_dir: Any) -> dict[str, Any]:
+        """metrics.json fields (per-object results, scene numbers), the scene picture, PVS and models.
+
+        This is the run's last use of the database: it is closed here.
+        """
+        out_dir = Path(out_dir)
+        s = self.session
+        try:
+            metrics = s.metrics()
+            save_scene_png(s, out_dir / "scene.png")
+            s.pvs.save(out_dir / "pvs.npz")
+            for name in s.added:
+                (out_dir / "models").mkdir(exist_ok=True)
+                self.database.export(name, out_dir / "models" / f"{name}.ply")
+            metrics["database"] = str(self.database.path)
+            metrics["database_objects"] = len(self.database)
+            if self.patrol:
+                metrics["patrol"] = dict(self.patrol)
+        finally:
+            self.database.close()
+        return metrics
+
+
+def save_scene_png(session: Any, path: Path) -> None:
+    """Top view of the objects' points coloured by how they were explained, with labels."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    colours = {"recognised": "tab:green", "modelled": "tab:blue", "ambiguous": "tab:orange",
+               "unknown": "tab:red", "modelling": "tab:purple", "unexplained": "tab:gray"}
+    fig, ax = plt.subplots(figsize=(7, 5.5), dpi=110)
+    if session.table is not None:
+        hull = session.table.hull @ session.table.world_T_table[:3, :2].T + session.table.world_T_table[:3, 3]
+        ring = np.vstack([hull, hull[:1]])
+        ax.plot(ring[:, 0], ring[:, 1], color="0.6", lw=1, label="table hull")
+    for obj in session.candidates():
+        pts = obj.cluster.points[:: max(1, len(obj.cluster.points) // 3000)]
+        ax.scatter(pts[:, 0], pts[:, 1], s=0.5, color=colours.get(obj.status, "k"))
+        label = obj.model or obj.status
+        ax.annotate(f"{obj.id}: {label}", obj.cluster.centroid[:2], fontsize=7, ha="center")
+    eyes = np.array([v.believed[:3, 3] for v in session.views]) if session.views else np.zeros((0, 3))
+    if len(eyes):
+        ax.plot(eyes[:, 0], eyes[:, 1], "k.", ms=3, label=f"{len(eyes)} views")
+    handles = [plt.Line2D([], [], marker="o", ls="", color=c, label=k) for k, c in colours.items()]
+    ax.legend(handles=handles + ax.get_legend_handles_labels()[0], fontsize=7, loc="upper right")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    explained = sum(o.explained for o in session.candidates())
+    ax.set_title(f"{session.sim.spec.name}: {explained} of {len(session.candidates())} objects explained, "
+                 f"{len(session.views)} views")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _scene(behaviour: ExploreBehaviour) -> Any:
+    return behaviour.read("scene").session
+
+
+def _current(behaviour: ExploreBehaviour, *statuses: str) -> Any:
+    """The object named by the ``object`` key if it still has one of ``statuses``, else None."""
+    scene = _scene(behaviour)
+    object_id = behaviour.read("object")
+    found = [o for o in scene.objects if o.id == object_id]
+    return found[0] if found and found[0].status in statuses else None
+
+
+class StartScene(ExploreBehaviour):
+    """Open the object database (seeding the world's known objects) and start a scene session."""
+
+    name = "start_scene"
+    writes = ("scene", "done", "explained", "unknown", "ambiguous", "object", "object_done")
+    params = (
+        Param("db", str, "", "", "object database file ('': $EXPLORE_DB or ./objects.db, as `explore db`)"),
+        Param("seed_known", bool, True, "", "add the world's `known: true` objects to the database first"),
+        Param("segmenter", str, "plane_clusters", "", "segmenter plugin"),
+        Param("scale", str, "table", "", "segmenter scale preset (room: 0.05 m / 20 points, table: 0.02 m / 30)",
+              choices=("room", "table")),
+        Param("recognizer", str, "ppf", "", "recogniser plugin (ppf, fpfh_ransac, vfh_mean_distance)"),
+        Param("min_q_h", float, Q_H_MIN, "", "q_h acceptance threshold (Kriegel Eq. 3.10)", low=0.0, high=1.0),
+        Param("validator", str, "pvs_votes", "", "pose validator plugin (Eq. 3.11)"),
+        Param("strategy", str, "ig_quality/bs_hr", "", "NBV strategy for modelling (overridden by --strategy)"),
+        Param("resolution", float, 0.0, "m", "scene PVS voxel (0: 5 mm, coarser for large regions)", low=0.0),
+        Param("max_views", int, 80, "", "view budget (overridden by --max-scans)", low=1),
+        Param("model_scans", int, 12, "", "scan budget per modelled object", low=1),
+        Param("model_coverage", float, 0.75, "", "stop modelling an object at this ĉ_m (Kriegel: 70-75 %)",
+              low=0.0, high=1.0),
+        Param("retry_scans", int, 3, "", "re-try recognition during the first modelling scans", low=0),
+        Param("multi_view_views", int, 10, "", "view budget per ambiguous object", low=0),
+        Param("register", bool, True, "", "pose graph + re-integration after each view (noisy mobile base)"),
+        Param("noise", bool, True, "", "execute motions with the robot's positioning noise"),
+    )
+
+    def work(self) -> Outcome:
+        from explore.database import ObjectDatabase, default_path
+        from explore.scene import SceneSession
+
+        ctx, p = self.context, self.p
+        config = ctx.config
+        database = ObjectDatabase.open(Path(p["db"]).expanduser() if p["db"] else default_path())
+        try:
+            if p["seed_known"]:
+                database.seed_from_world(ctx.sim)
+            recognizer = ctx.registry.create("recognizer", p["recognizer"], {"min_q_h": p["min_q_h"]},
+                                             self.tree_path or "<tree>", "recognizer")
+            session = SceneSession(
+                ctx.sim, ctx.registry, database,
+                segmenter=(p["segmenter"], {"scale": p["scale"]}), recognizer=recognizer,
+                validator=p["validator"],
+                strategy=(config.strategy or p["strategy"], config.scoped("strategy")),
+                seed=config.seed, resolution=p["resolution"] or None,
+                max_views=config.max_scans or p["max_views"], model_scans=p["model_scans"],
+                model_coverage=p["model_coverage"], retry_scans=p["retry_scans"],
+                multi_view_views=p["multi_view_views"], noise=p["noise"], planner=config.planner,
+                run_name=ctx.out_dir.name, register=p["register"],
+            )
+        except BaseException:
+            database.close()
+            raise
+        run = SceneRun(session, database)
+        ctx.state["scene"] = run
+        self.write("scene", run)
+        for key, value in (("done", False), ("explained", False), ("unknown", []), ("ambiguous", []),
+                           ("object", None), ("object_done", False)):
+            self.write(key, value)
+        ctx.trace("decision", what="scene", database=str(database.path), known=database.names())
+        return success(f"database {database.path} with {len(database)} objects")
+
+
+class SceneOverview(ExploreBehaviour):
+    """The first look: the world's overview view (line sensors: scan paths over the region); PVS initialised."""
+
+    name = "scene_overview"
+    reads = ("scene",)
+    blocking = True
+
+    def work(self) -> Outcome:
+        views = _scene(self).overview()
+        if not views:
+            return failure("no overview view is reachable")
+        for view in views:
+            self.context.trace("scan", index=view.index + 1, purpose=view.purpose, returns=int(view.scan.hits.sum()))
+        return success(f"{len(views)} overview views")
+
+
+class SegmentScene(ExploreBehaviour):
+    """Support plane, object clusters of every new view, associated to the scene's objects (Görner Ch. 3)."""
+
+    name = "segment_scene"
+    reads = ("scene",)
+    blocking = True
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        objects = scene.segment()
+        self.context.status_line = _status(self)
+        if scene.table is None:
+            return failure("no support plane found")
+        return success(f"{len(objects)} objects")
+
+
+class RecogniseObjects(ExploreBehaviour):
+    """Recognise every object not yet explained against the database (PPF / FPFH / VFH)."""
+
+    name = "recognise_objects"
+    reads = ("scene",)
+    blocking = True
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        count = 0
+        for obj in scene.candidates():
+            if obj.status in ("unexplained", "unknown", "ambiguous"):
+                hypotheses = scene.recognise(obj)
+                count += 1
+                self.context.trace("decision", what="recognise", object=obj.id,
+                                   hypotheses=[[h.model, round(h.q_h, 4)] for h in hypotheses[:5]])
+        return success(f"{count} objects, {len(scene.models)} models")
+
+
+class ValidateObjects(ExploreBehaviour):
+    """q_h threshold and PVS votes (Eq. 3.10, 3.11): recognised, ambiguous or unknown."""
+
+    name = "validate_objects"
+    reads = ("scene",)
+    writes = ("unknown", "ambiguous", "object")
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        for obj in scene.candidates():
+            if obj.status in ("unexplained", "unknown", "ambiguous") and obj.hypotheses is not None:
+                scene.validate(obj)
+                self.context.trace("decision", what="validate", object=obj.id, status=obj.status, model=obj.model,
+                                   q_h=obj.q_h, v_h=obj.v_h, rejected=obj.rejected)
+        unknown = [o.id for o in scene.by_status("unknown") if o in scene.candidates()]
+        ambiguous = [o.id for o in scene.by_status("ambiguous") if o in scene.candidates()]
+        self.write("unknown", unknown)
+        self.write("ambiguous", ambiguous)
+        self.write("object", None)
+        self.context.status_line = _status(self)
+        return success(f"{len(ambiguous)} ambiguous, {len(unknown)} unknown")
+
+
+class MultiViewStep(ExploreBehaviour):
+    """One more view of the current ambiguous object; per-view hypotheses fused on SE(3) (Sec. 5.6.2)."""
+
+    name = "multi_view_step"
+    reads = ("scene", "object")
+    writes = ("object_done",)
+    blocking = True
+
+    def work(self) -> Outcome:
+        obj = _current(self, "ambiguous")
+        if obj is None:
+            self.write("object_done", True)
+            return success("nothing ambiguous")
+        done = _scene(self).multi_view_step(obj)
+        self.write("object_done", done)
+        self.context.status_line = _status(self)
+        self.context.trace("decision", what="multi_view", object=obj.id, status=obj.status, views=obj.multi_views)
+        return success(f"object {obj.id}: {obj.status}")
+
+
+class ModelCluster(ExploreBehaviour):
+    """One NBS iteration for the current unknown object (its box; the rest of the scene as obstacles)."""
+
+    name = "model_cluster"
+    reads = ("scene", "object")
+    writes = ("object_done",)
+    blocking = True
+
+    def work(self) -> Outcome:
+        obj = _current(self, "unknown", "modelling")
+        if obj is None:
+            self.write("object_done", True)
+            return success("nothing to model")
+        done = _scene(self).model_step(obj)
+        self.write("object_done", done)
+        self.context.status_line = _status(self)
+        self.context.trace("scan", object=obj.id, purpose="model", scans=obj.modelling_scans,
+                           coverage_estimate=obj.coverage_estimate)
+        return success(f"object {obj.id}: {obj.modelling_scans} scans, ĉ_m {obj.coverage_estimate:.2f}")
+
+
+class UpdateDatabase(ExploreBehaviour):
+    """Add the modelled object (mesh, PPF/VFH descriptors, provenance, location); remember recognised ones."""
+
+    name = "update_database"
+    reads = ("scene", "object")
+    blocking = True
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        obj = _current(self, "modelling")
+        name = scene.finish_modelling(obj) if obj is not None else None
+        scene.remember_locations()
+        if name is not None:
+            self.context.trace("decision", what="database", object=obj.id, added=name)
+            return success(f"added {name}")
+        return success("locations recorded")
+
+
+class LearnObject(ExploreBehaviour):
+    """Görner: learn the current unknown object from the views already taken (mesh + database)."""
+
+    name = "learn_object"
+    reads = ("scene", "object")
+    blocking = True
+
+    def work(self) -> Outcome:
+        obj = _current(self, "unknown")
+        if obj is None:
+            return success("nothing to learn")
+        name = _scene(self).learn_from_views(obj)
+        if name is None:
+            return success(f"object {obj.id}: too few points, left unknown")
+        self.context.trace("decision", what="database", object=obj.id, added=name)
+        return success(f"added {name}")
+
+
+class SettleFromViews(ExploreBehaviour):
+    """Resolve the current ambiguous object with the views already taken (fused per-view poses)."""
+
+    name = "settle_from_views"
+    reads = ("scene", "object")
+    blocking = True
+
+    def work(self) -> Outcome:
+        obj = _current(self, "ambiguous")
+        if obj is None:
+            return success("nothing ambiguous")
+        return success(f"object {obj.id}: {_scene(self).settle_from_views(obj)}")
+
+
+class CheckExplained(ExploreBehaviour):
+    """Write ``explained`` (every object explained) and ``done`` (explained, out of views or stuck)."""
+
+    name = "check_explained"
+    reads = ("scene",)
+    writes = ("done", "explained")
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        explained = scene.all_explained
+        open_objects = scene.by_status("unexplained", "unknown", "ambiguous")
+        done = explained or scene.budget_left <= 0 or not open_objects
+        self.write("explained", explained)
+        self.write("done", done)
+        found = scene.candidates()
+        return success(f"{sum(o.explained for o in found)} of {len(found)} explained")
+
+
+class RegisterViews(ExploreBehaviour):
+    """gtsam pose graph over all views (odometry + ICP + loop closures); re-integrate PVS and clusters."""
+
+    name = "register_views"
+    reads = ("scene",)
+    blocking = True
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        if len(scene.views) < 2:
+            return success("fewer than two views")
+        result = scene.correct_poses()
+        edges = sum(e.kind != "odometry" for e in result.edges)
+        return success(f"{len(scene.views)} poses, {edges} ICP edges")
+
+
+class SurroundTable(ExploreBehaviour):
+    """Görner's exploration step: views from up to 12 observation poses around a table's centre.
+
+    The focus points are the known tables (environment boxes at table height, Görner's
+    assumption that table positions are known); ``table`` picks one by index or name.
+    """
+
+    name = "surround_table"
+    reads = ("scene", "table")
+    blocking = True
+    params = (
+        Param("d_min", float, 0.7, "m", "closest observation distance (Görner 0.7 m)", low=0.1),
+        Param("d_max", float, 1.5, "m", "farthest observation distance (Görner 1.5 m)", low=0.1),
+        Param("step_deg", float, 30.0, "deg", "angle between observation poses (Görner 0.5 rad)", low=1.0),
+    )
+
+    def work(self) -> Outcome:
+        import math
+
+        from explore.scene_patrol import known_tables, surround
+
+        run = self.read("scene")
+        scene = run.session
+        tables = known_tables(scene.sim)
+        table = self.read("table")
+        if not tables:
+            return failure("the world has no table to surround")
+        focus = tables[table] if isinstance(table, str) and table in tables else list(tables.values())[0]
+        name = next(k for k, v in tables.items() if v is focus)
+        views = surround(scene, focus, self.p["d_min"], self.p["d_max"], math.radians(self.p["step_deg"]))
+        run.patrol.setdefault("tables", []).append({"table": name, "views": len(views)})
+        return success(f"{name}: {len(views)} views")
+
+
+class ListTables(ExploreBehaviour):
+    """Write ``tables``: the names of the known tables to patrol (round robin order)."""
+
+    name = "list_tables"
+    reads = ("scene",)
+    writes = ("tables",)
+
+    def work(self) -> Outcome:
+        from explore.scene_patrol import known_tables
+
+        names = list(known_tables(_scene(self).sim))
+        self.write("tables", names)
+        return success(", ".join(names) or "no tables") if names else failure("the world has no tables")
+
+
+def _status(behaviour: ExploreBehaviour) -> str:
+    stats = behaviour.read("scene").live_stats()
+    return "  ".join(f"{k} {v}" for k, v in stats.items())
+
+
+PLUGINS = [
+    StartScene,
+    SceneOverview,
+    SegmentScene,
+    RecogniseObjects,
+    ValidateObjects,
+    MultiViewStep,
+    ModelCluster,
+    UpdateDatabase,
+    LearnObject,
+    SettleFromViews,
+    CheckExplained,
+    RegisterViews,
+    ListTables,
+    SurroundTable,
+]
