@@ -372,6 +372,8 @@ def _cloud(points: Points3, voxel: float):  # -> open3d.geometry.PointCloud
     import open3d as o3d
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(voxel)
+    if len(cloud.points) < 3:  # nothing to register (a view that saw none of the scene's surfaces)
+        return cloud
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=3.0 * voxel, max_nn=30))
     cloud.orient_normals_towards_camera_location(np.zeros(3))  # clouds are in the sensor frame
     return cloud

@@ -116,7 +116,9 @@ def test_vfh_mean_distance_recognises_among_several(registry, scene):
     results = {name: recognizer.recognize(cluster, models, scan) for name, cluster in clusters.items()}
     correct = {name for name, hyps in results.items() if hyps and hyps[0].model == name}
     assert {"duck", "teddy", "bunny"} <= correct
-    assert len(correct) >= 4  # measured 5 of 6 (the box-like sorter is confused with the teddy)
+    # gamma 15 favours precision: no cluster gets a wrong model; the mug (mean distance 15.3)
+    # and the part (17.7) just miss it, and at gamma 30 the sorter would get the teddy
+    assert all(hyps[0].model == name for name, hyps in results.items() if hyps)
     duck = results["duck"][0]
     assert duck.diagnostics["mean_distance"] < recognizer.gamma
     t_err, r_err = pose_error(duck.pose, truth["duck"])
