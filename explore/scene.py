@@ -631,13 +631,18 @@ class SceneSession:
         return False
 
     def _settle_ambiguous(self, obj: SceneObject) -> None:
-        """Out of views: keep the fused pose if enough views agree, else the object is unknown."""
+        """Out of views: keep the fused pose if enough views agree, or if the robot could not reach a
+        confirming view and the validated hypothesis has no rival (Kriegel's single-view
+        recognition: q_h and the PVS votes passed); else the object is unknown."""
         if obj.status != AMBIGUOUS:
             return
-        if obj.fused is not None and len(obj.fused.members) >= self.multi_view_agree:
+        agreed = obj.fused is not None and len(obj.fused.members) >= self.multi_view_agree
+        unconfirmed = obj.fused is not None and not obj.rivals
+        if agreed or unconfirmed:
             obj.pose = obj.fused.pose
             obj.status = RECOGNISED
-            obj.note("recognised by the fused per-view poses")
+            obj.note("recognised by the fused per-view poses" if agreed else
+                     f"recognised from {len(obj.fused.members)} view(s): no confirming view was reachable")
             if obj.recognised_after_views is None:
                 obj.recognised_after_views = len(self.views)
         else:

@@ -219,3 +219,26 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_
     assert errors["corrected_mm"] <= 0.5 * errors["odometry_mm"], errors
     assert errors["corrected_deg"] <= 0.5 * errors["odometry_deg"], errors
     assert free_corrected < free_odometry, (free_corrected, free_odometry)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tree, world", [("scene_exploration", "workcell"), ("table_patrol", "scene_small_mobile")])
+def test_scene_trees_run_with_an_arm_and_a_mobile_base(registry, tmp_path, tree, world):
+    """The arm in the workcell and Görner's table patrol with the noisy mobile base: every cluster
+    ends recognised or modelled into the database, and a known object recognised is within 5 mm / 2°."""
+    from explore.run import RunConfig, execute
+
+    db = tmp_path / "objects.db"
+    result = execute(RunConfig(tree=tree, world=world, seed=0, out=tmp_path / "run",
+                               settings={"start_scene.db": str(db)}), registry)
+    metrics = result.metrics
+    assert result.status == "success", result.reason
+    assert metrics["all_explained"] and metrics["views"] >= 3 and metrics["objects"]
+    assert {o["result"] for o in metrics["objects"]} <= {"recognised", "modelled"}
+    for row in metrics["objects"]:
+        if row["result"] == "recognised":
+            assert row["pose_error_mm"] < 5.0 and row["pose_error_deg"] < 2.0, row
+    with ObjectDatabase.open(db, readonly=True) as opened:
+        modelled = [o for o in metrics["objects"] if o["result"] == "modelled"]
+        # at least one model per modelled object (a split cluster is stored as its own model)
+        assert len([r for r in opened.records() if r.provenance == "modelled"]) >= len(modelled)
