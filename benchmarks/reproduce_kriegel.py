@@ -227,8 +227,7 @@ def speed(repeat: int, world: str) -> int:
     warm_up()
     with Simulation(world, registry) as sim:
         session = ModellingSession(sim, "ig_quality/sphere", registry, seed=0, max_scans=5)
-        while session.step() is not None:
-            pass
+        session.run()
         sphere = registry.create("view_generator", "sphere", {"n_inclination": 10, "n_azimuth": 10}, "<speed>")
         pool = sphere.generate(session.ctx)
         print(f"{world}, PVS {session.pvs.resolution * 1000:.0f} mm, state after 5 scans, "

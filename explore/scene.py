@@ -652,8 +652,9 @@ class SceneSession:
     def resolve_ambiguous(self) -> None:
         """Multi-view recognition of every ambiguous object until it is resolved."""
         for obj in self.by_status(AMBIGUOUS):
-            while not self.multi_view_step(obj):
-                pass
+            resolved = False
+            while not resolved:
+                resolved = self.multi_view_step(obj)
 
     # -- modelling unknown objects -------------------------------------------------------------
     def start_modelling(self, obj: SceneObject) -> Any:
@@ -785,8 +786,9 @@ class SceneSession:
     def model_unknown(self) -> None:
         """Model every unknown object, one after the other."""
         for obj in self.by_status(UNKNOWN):
-            while not self.model_step(obj):
-                pass
+            finished = False
+            while not finished:
+                finished = self.model_step(obj)
             if obj.status == MODELLING:
                 self.finish_modelling(obj)
 
