@@ -168,6 +168,8 @@ class SceneSession:
     retry_scans : re-try recognition after each of the first ``retry_scans`` modelling scans
     multi_view_views : view budget per ambiguous object; ``multi_view_agree`` per-view
         hypotheses must agree (fused cluster) before an object counts as recognised
+    view_retry_q_h : when no hypothesis of the merged views passes, models proposed with at
+        least this q_h are recognised view by view (registration residuals of a noisy base)
     noise : execute motions with the robot's positioning noise
     planner : motion planner plugin name (robots other than the free flyer)
     run_name : recorded as the provenance of modelled objects
@@ -203,6 +205,7 @@ class SceneSession:
         retry_scans: int = 3,
         multi_view_views: int = 10,
         multi_view_agree: int = 2,
+        view_retry_q_h: float = 0.25,
         noise: bool = True,
         planner: str | None = None,
         run_name: str = "run",
@@ -234,6 +237,7 @@ class SceneSession:
         self.retry_scans = int(retry_scans)
         self.multi_view_views = int(multi_view_views)
         self.multi_view_agree = int(multi_view_agree)
+        self.view_retry_q_h = float(view_retry_q_h)
         self.run_name = run_name
         self.associate_tolerance = float(associate_tolerance)
         self.box_margin = float(box_margin)
@@ -470,6 +474,7 @@ class SceneSession:
         self._timed("validate_s", start)
         if not survivors:
             obj.status, obj.model, obj.pose, obj.rivals = UNKNOWN, None, None, []
+            self._recognise_from_views(obj)
             return obj.status
         best = survivors[0]
         obj.model, obj.pose, obj.q_h, obj.v_h = best.model, best.pose, best.q_h, best.diagnostics["v_h"]
@@ -489,6 +494,48 @@ class SceneSession:
         else:  # not yet confirmed by a second view (Kriegel Sec. 5.6.2): take more views
             obj.status = AMBIGUOUS
         return obj.status
+
+    def _recognise_from_views(self, obj: SceneObject) -> bool:
+        """Multi-view recognition (Kriegel Sec. 5.6.2) when the merged views fail q_h.
+
+        The views of a noisy base are registered to a few millimetres, and at 1-1.5 m that
+        residual breaks the merged render-and-compare (Eq. 3.10) though each view alone fits.
+        Every model proposed with q_h of at least ``view_retry_q_h`` is recognised in each
+        recognition view alone (q_h and the PVS votes per view); if at least
+        ``multi_view_agree`` of these poses agree (:func:`fuse_poses`) and the PVS accepts the
+        fused pose, the object is recognised there.
+        """
+        names = sorted({h.model for h in obj.hypotheses if h.q_h >= self.view_retry_q_h})
+        best: tuple[str, FusedPose] | None = None
+        for name in names:
+            for view in self.recognition_cluster(obj).view_ids:
+                if (int(view), name) in obj.checked_views:
+                    continue
+                obj.checked_views.add((int(view), name))
+                found = self.view_hypothesis(obj, int(view), [name])
+                if found is not None:
+                    obj.view_hypotheses.append((int(view), found))
+            mine = [h for _, h in obj.view_hypotheses if h.model == name]
+            if len(mine) < self.multi_view_agree:
+                continue
+            fused = fuse_poses([h.pose for h in mine], [h.q_h for h in mine])
+            if len(fused.members) >= self.multi_view_agree and (best is None or fused.weight > best[1].weight):
+                best = (name, fused)
+        if best is None:
+            return False
+        name, fused = best
+        check = self.validator.validate(self.pvs, self._vertices[name], fused.pose)
+        if not check.accepted:
+            obj.note(f"{len(fused.members)} views agree on {name}, but the PVS rejects the fused pose")
+            return False
+        members = [h for _, h in obj.view_hypotheses if h.model == name]
+        obj.model, obj.pose, obj.fused, obj.status = name, fused.pose, fused, RECOGNISED
+        obj.q_h = float(np.mean([members[i].q_h for i in fused.members]))
+        obj.v_h = float(check.score)
+        obj.note(f"recognised as {name} by {len(fused.members)} agreeing views (merged views failed q_h)")
+        if obj.recognised_after_views is None:
+            obj.recognised_after_views = len(self.views)
+        return True
 
     def _split_residual(self, obj: SceneObject) -> SceneObject | None:
         """Points the recognised model does not explain (an object touching it) become a new object.
@@ -832,8 +879,22 @@ class SceneSession:
 
     # -- pose graph and re-integration ---------------------------------------------------------
     def correct_poses(self) -> Any:
-        """gtsam pose graph over every view (odometry + ICP factors); re-integrate at the result."""
+        """gtsam pose graph over every view (odometry + ICP factors); re-integrate at the result.
+
+        A session with an incremental graph (a noisy mobile base) has registered and
+        localised every view as it came; that graph's solution is the result (a batch graph
+        over the same views would lack its multi-start search and its map factors).
+        """
+        from .registration import PoseGraphResult
+
         start = time.perf_counter()
+        if self.graph is not None:
+            poses = self.graph.graph.optimize(self.graph.max_iterations)
+            self.graph.poses = poses
+            self.reintegrate(list(poses))
+            self._timed("registration_s", start)
+            error = self.graph.graph.error
+            return PoseGraphResult(poses, np.stack(self.graph.believed), list(self.graph.graph.edges), *error)
         believed = [v.believed for v in self.views]
         result = self.registrar.register([rebase_scan(v.scan, v.believed) if v.corrected is not None else v.scan
                                           for v in self.views], believed)

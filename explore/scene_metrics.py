@@ -1,10 +1,12 @@
 """Ground-truth evaluation of a scene exploration (metrics only; the session never reads this).
 
 Per ground-truth object: was it recognised (which model, pose error in mm and degrees,
-Kriegel's rotation error = angle of R_est R_gt^T) or modelled (coverage c_a of the modelled
-surface against the object's observable surface), and after how many views. Per scene: all
-explained, views, time, travel; the recogniser's wrong matches and where they were rejected
-(q_h threshold or PVS votes); precision and recall of the recognitions.
+Kriegel's rotation error = angle of R_est R_gt^T; for a robot whose views were corrected by a
+pose graph also the error in the robot's map, without its remaining localisation error) or
+modelled (coverage c_a of the modelled surface against the object's observable surface), and
+after how many views. Per scene: all explained, views, time, travel; the recogniser's wrong
+matches and where they were rejected (q_h threshold or PVS votes); precision and recall of the
+recognitions.
 
 The true pose of a database model in the current world comes from its first recorded
 location (the frame it was added in, in world W0): the body it was made from is moved from
@@ -79,6 +81,18 @@ def _body_of(points: np.ndarray, sim: Any, tolerance: float = 0.01) -> tuple[str
     return (best, share) if share >= 0.3 else (None, share)
 
 
+def _in_map(session: SceneSession, obj: Any, truth: Pose) -> Pose:
+    """The true pose as the robot's map has it: moved by the localisation error of the view
+    that saw most of the object (so a pose error against it is the recognition's own, not the
+    base's remaining drift)."""
+    from .geometry import invert
+
+    ids, counts = np.unique(obj.cluster.views, return_counts=True)
+    view = session.views[int(ids[np.argmax(counts)])]
+    corrected = view.corrected if view.corrected is not None else view.believed
+    return corrected @ invert(view.true_pose) @ truth
+
+
 def _errors(estimate: Pose | None, truth: Pose | None) -> tuple[float | None, float | None]:
     if estimate is None or truth is None:
         return None, None
@@ -119,6 +133,8 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 correct_recognitions += int(right)
                 row["correct_model"] = right
                 row["pose_error_mm"], row["pose_error_deg"] = _errors(obj.pose, truth if right else None)
+                if right and truth is not None and session.registered:
+                    row["map_error_mm"], row["map_error_deg"] = _errors(obj.pose, _in_map(session, obj, truth))
                 if right and truth is not None:  # symmetric objects: where the surface is, not the frame
                     mesh = next(m.mesh for m in session.models if m.name == obj.model)
                     row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
