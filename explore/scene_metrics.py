@@ -81,6 +81,20 @@ def _body_of(points: np.ndarray, sim: Any, tolerance: float = 0.01) -> tuple[str
     return (best, share) if share >= 0.3 else (None, share)
 
 
+def _true_points(session: SceneSession, cluster: Any) -> np.ndarray:
+    """Where the cluster's points really are: each moved by its view's remaining pose error
+    (the body an object is must not depend on how well a drifting base was localised)."""
+    from .geometry import invert, transform_points
+
+    points = cluster.points.copy()
+    for index in np.unique(cluster.views):
+        view = session.views[int(index)]
+        recorded = view.corrected if view.corrected is not None else view.believed
+        mask = cluster.views == index
+        points[mask] = transform_points(view.true_pose @ invert(recorded), cluster.points[mask])
+    return points
+
+
 def _in_map(session: SceneSession, obj: Any, truth: Pose) -> Pose:
     """The true pose as the robot's map has it: moved by the localisation error of the view
     that saw most of the object (so a pose error against it is the recognition's own, not the
@@ -114,7 +128,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
         return truths[name]
 
     found = session.candidates()
-    owner = {o.id: _body_of(o.cluster.points, sim) for o in found}
+    owner = {o.id: _body_of(_true_points(session, o.cluster), sim) for o in found}
     rows = []
     wrong = {"proposed": 0, "rejected_q_h": 0, "rejected_pvs": 0, "accepted": 0}
     correct_recognitions = recognitions = 0
