@@ -205,7 +205,7 @@ class SceneSession:
         retry_scans: int = 3,
         multi_view_views: int = 10,
         multi_view_agree: int = 2,
-        view_retry_q_h: float = 0.25,
+        view_retry_q_h: float = 0.0,
         noise: bool = True,
         planner: str | None = None,
         run_name: str = "run",
