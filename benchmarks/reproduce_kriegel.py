@@ -54,7 +54,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 QUICK_STRATEGIES = ["ig_quality/bs_hr", "ig_quality/sphere", "random/bs_hr"]
 ROW_KEYS = ("strategy", "world", "median_scans", "coverage_at_termination", "coverage_at_10", "coverage_at_30",
             "path_length_m", "selection_s")
-EXTRA_KEYS = ("notch", "median_coverage_at_10", "scans_taken", "rms_error_mm", "chamfer_mm", "coverage_auc",
+EXTRA_KEYS = ("notch", "median_coverage_at_10", "median_coverage_at_30", "coverage_at_30_per_seed", "scans_taken",
+              "rms_error_mm", "chamfer_mm", "coverage_auc",
               "coverage_estimate_final", "fallback_share", "max_selection_s", "max_candidates", "seeds",
               "variant", "normalise", "hierarchy")
 
@@ -152,6 +153,8 @@ def summarise(runs: list[dict], strategy: str, world: str, max_scans: int, optio
         "selection_s": float(np.mean(sel)) if sel else 0.0,
         "notch": float(notch),
         "median_coverage_at_10": 100.0 * float(np.median(curves[:, min(10, max_scans) - 1])),
+        "median_coverage_at_30": 100.0 * float(np.median(curves[:, 29])) if max_scans >= 30 else None,
+        "coverage_at_30_per_seed": [100.0 * float(c) for c in curves[:, 29]] if max_scans >= 30 else None,
         "coverage_last": 100.0 * float(np.mean(curves[:, -1])),
         "scans_taken": float(np.mean(scans)),
         "rms_error_mm": 1000.0 * float(np.nanmean([r.get("rms_error_m", np.nan) for r in runs])),
