@@ -506,7 +506,7 @@ class SceneSession:
         fused pose, the object is recognised there.
         """
         names = sorted({h.model for h in obj.hypotheses if h.q_h >= self.view_retry_q_h})
-        best: tuple[str, FusedPose] | None = None
+        best: tuple[str, FusedPose, list[Hypothesis]] | None = None
         for name in names:
             for view in self.recognition_cluster(obj).view_ids:
                 if (int(view), name) in obj.checked_views:
@@ -520,19 +520,18 @@ class SceneSession:
                 continue
             fused = fuse_poses([h.pose for h in mine], [h.q_h for h in mine])
             if len(fused.members) >= self.multi_view_agree and (best is None or fused.weight > best[1].weight):
-                best = (name, fused)
+                best = (name, fused, mine)
         if best is None:
             return False
-        name, fused = best
+        name, fused, mine = best
         check = self.validator.validate(self.pvs, self._vertices[name], fused.pose)
         if not check.accepted:
             obj.note(f"{len(fused.members)} views agree on {name}, but the PVS rejects the fused pose")
             return False
-        members = [h for _, h in obj.view_hypotheses if h.model == name]
         obj.model, obj.pose, obj.fused, obj.status = name, fused.pose, fused, RECOGNISED
-        obj.q_h = float(np.mean([members[i].q_h for i in fused.members]))
+        obj.q_h = float(np.mean([mine[i].q_h for i in fused.members]))
         obj.v_h = float(check.score)
-        obj.note(f"recognised as {name} by {len(fused.members)} agreeing views (merged views failed q_h)")
+        obj.note(f"recognised as {name} by {len(fused.members)} agreeing views (no merged hypothesis survived)")
         if obj.recognised_after_views is None:
             obj.recognised_after_views = len(self.views)
         return True
