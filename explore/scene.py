@@ -75,6 +75,11 @@ class View:
     object_id: int | None = None
     corrected: Pose | None = None
 
+    @property
+    def recorded(self) -> Pose:
+        """The pose the scan is recorded at now: the pose graph's estimate, else odometry."""
+        return self.corrected if self.corrected is not None else self.believed
+
 
 @dataclass
 class SceneObject:
@@ -908,7 +913,7 @@ class SceneSession:
 
         moved = any(
             max(err[0] / tolerance[0], err[1] / tolerance[1]) > 1.0
-            for err in (se3_error(p, v.corrected if v.corrected is not None else v.believed)
+            for err in (se3_error(p, v.recorded)
                         for v, p in zip(self.views[:-1], poses[:-1], strict=True))
         )
         if moved:
@@ -926,7 +931,7 @@ class SceneSession:
 
         deltas = []
         for view, pose in zip(self.views, poses, strict=True):
-            current = view.corrected if view.corrected is not None else view.believed
+            current = view.recorded
             deltas.append(np.asarray(pose) @ invert(current))
             view.scan = rebase_scan(view.scan, pose)
             view.corrected = np.asarray(pose).copy()

@@ -89,9 +89,8 @@ def _true_points(session: SceneSession, cluster: Any) -> np.ndarray:
     points = cluster.points.copy()
     for index in np.unique(cluster.views):
         view = session.views[int(index)]
-        recorded = view.corrected if view.corrected is not None else view.believed
         mask = cluster.views == index
-        points[mask] = transform_points(view.true_pose @ invert(recorded), cluster.points[mask])
+        points[mask] = transform_points(view.true_pose @ invert(view.recorded), cluster.points[mask])
     return points
 
 
@@ -103,8 +102,7 @@ def _in_map(session: SceneSession, obj: Any, truth: Pose) -> Pose:
 
     ids, counts = np.unique(obj.cluster.views, return_counts=True)
     view = session.views[int(ids[np.argmax(counts)])]
-    corrected = view.corrected if view.corrected is not None else view.believed
-    return corrected @ invert(view.true_pose) @ truth
+    return view.recorded @ invert(view.true_pose) @ truth
 
 
 def _errors(estimate: Pose | None, truth: Pose | None) -> tuple[float | None, float | None]:
@@ -223,7 +221,7 @@ def pose_graph_errors(session: SceneSession) -> dict[str, float]:
         return float(1e3 * errors[:, 0].mean()), float(errors[:, 1].mean())
 
     believed = [v.believed for v in views]
-    corrected = [v.corrected if v.corrected is not None else v.believed for v in views]
+    corrected = [v.recorded for v in views]
     truth = [v.true_pose for v in views]
     out: dict[str, float] = {"views": len(views)}
     out["odometry_mm"], out["odometry_deg"] = mean_error(believed, truth)
