@@ -45,7 +45,7 @@ import numpy as np
 from .geometry import invert, transform_points
 from .meshes import TriMesh
 from .recognition import Hypothesis, Model, rivals
-from .registration import FusedPose, fuse_poses, rebase_scan
+from .registration import FusedPose, PoseGraphResult, fuse_poses, rebase_scan
 from .scan import Scan
 from .scene_motion import Mover, Target, target_start
 from .scene_views import as_target, order_by_novelty, overview_targets, viewing_distance, views_around
@@ -173,8 +173,6 @@ class SceneSession:
     retry_scans : re-try recognition after each of the first ``retry_scans`` modelling scans
     multi_view_views : view budget per ambiguous object; ``multi_view_agree`` per-view
         hypotheses must agree (fused cluster) before an object counts as recognised
-    view_retry_q_h : when no hypothesis of the merged views passes, models proposed with at
-        least this q_h are recognised view by view (registration residuals of a noisy base)
     noise : execute motions with the robot's positioning noise
     planner : motion planner plugin name (robots other than the free flyer)
     run_name : recorded as the provenance of modelled objects
@@ -210,7 +208,6 @@ class SceneSession:
         retry_scans: int = 3,
         multi_view_views: int = 10,
         multi_view_agree: int = 2,
-        view_retry_q_h: float = 0.0,
         noise: bool = True,
         planner: str | None = None,
         run_name: str = "run",
@@ -242,7 +239,6 @@ class SceneSession:
         self.retry_scans = int(retry_scans)
         self.multi_view_views = int(multi_view_views)
         self.multi_view_agree = int(multi_view_agree)
-        self.view_retry_q_h = float(view_retry_q_h)
         self.run_name = run_name
         self.associate_tolerance = float(associate_tolerance)
         self.box_margin = float(box_margin)
@@ -505,21 +501,15 @@ class SceneSession:
 
         The views of a noisy base are registered to a few millimetres, and at 1-1.5 m that
         residual breaks the merged render-and-compare (Eq. 3.10) though each view alone fits.
-        Every model proposed with q_h of at least ``view_retry_q_h`` is recognised in each
-        recognition view alone (q_h and the PVS votes per view); if at least
+        Every model the merged views proposed is recognised in each recognition view alone
+        (q_h and the PVS votes per view); if at least
         ``multi_view_agree`` of these poses agree (:func:`fuse_poses`) and the PVS accepts the
         fused pose, the object is recognised there.
         """
-        names = sorted({h.model for h in obj.hypotheses if h.q_h >= self.view_retry_q_h})
         best: tuple[str, FusedPose, list[Hypothesis]] | None = None
-        for name in names:
+        for name in sorted({h.model for h in obj.hypotheses}):
             for view in self.recognition_cluster(obj).view_ids:
-                if (int(view), name) in obj.checked_views:
-                    continue
-                obj.checked_views.add((int(view), name))
-                found = self.view_hypothesis(obj, int(view), [name])
-                if found is not None:
-                    obj.view_hypotheses.append((int(view), found))
+                self._check_view(obj, int(view), [name])
             mine = [h for _, h in obj.view_hypotheses if h.model == name]
             if len(mine) < self.multi_view_agree:
                 continue
@@ -641,13 +631,20 @@ class SceneSession:
         used = {view for view, _ in obj.view_hypotheses}
         views = set(self.recognition_cluster(obj).view_ids) | set(obj.cluster.view_ids[-2:])
         for view in sorted(views):
-            if view in used or (view, obj.model) in obj.checked_views:
-                continue
-            obj.checked_views.add((view, obj.model))
-            found = self.view_hypothesis(obj, view, names)
-            if found is not None:
-                obj.view_hypotheses.append((view, found))
+            if view not in used:
+                self._check_view(obj, view, names)
         return len(obj.view_hypotheses)
+
+    def _check_view(self, obj: SceneObject, view: int, names: list[str]) -> None:
+        """Recognise the object in one view (once per view and first model name); keep the
+        validated hypothesis."""
+        key = (int(view), names[0])
+        if key in obj.checked_views:
+            return
+        obj.checked_views.add(key)
+        found = self.view_hypothesis(obj, int(view), names)
+        if found is not None:
+            obj.view_hypotheses.append((int(view), found))
 
     def settle_from_views(self, obj: SceneObject) -> str:
         """Resolve an ambiguous object with the views already taken (no new ones): fuse and decide."""
@@ -889,8 +886,6 @@ class SceneSession:
         localised every view as it came; that graph's solution is the result (a batch graph
         over the same views would lack its multi-start search and its map factors).
         """
-        from .registration import PoseGraphResult
-
         start = time.perf_counter()
         if self.graph is not None:
             poses = self.graph.graph.optimize(self.graph.max_iterations)
