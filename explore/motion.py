@@ -835,7 +835,8 @@ def _mobile_plan(
     tuck: bool,
     name: str,
 ) -> MotionPlan | None:
-    """Joints to the carried values, the base by ``drive``, joints to the goal; one MotionPlan.
+    """Joints to the carried values, the base by ``drive``, joints to the goal; one MotionPlan
+    (only the joint motion when the base stays put).
 
     ``drive(base_problem, start_base, goal_base, deadline)`` returns the base rollout (m + 1, 3)
     at ``robot.dt`` and its base controls (m, nb), or None. The drive is checked by the
@@ -853,6 +854,13 @@ def _mobile_plan(
     th = base[2]
     goal[th] = start[th] + _wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
     joints = [i for i in range(len(start)) if i not in base]
+    if np.allclose(start[base], goal[base], atol=1e-9):  # the base stays put: only the joints move
+        path = _joint_motion(problem, start, goal, deadline, seed)
+        if path is None:
+            return None
+        controls, rolled = robot.controls_from_path(path)
+        return MotionPlan(rolled, controls=controls, dt=float(robot.dt), planner=name,
+                          planning_time=time.perf_counter() - t0, length=path_length(robot, rolled))
     lower, upper = problem.lower[base].copy(), problem.upper[base].copy()
     lower[2], upper[2] = start[th] - 2 * math.pi, start[th] + 2 * math.pi
     for values in _carried_joints(problem, start, goal, tuck):

@@ -788,6 +788,8 @@ class IncrementalPoseGraph:
     world and not only at its first scan. The search is narrow because a table is symmetric
     (its front edge fits its back edge). The default sigmas trust the map's heading (1 deg)
     more than its position (0.1 m): with one table edge in view the match slides along it.
+    A view added with a base laser scan (``add(..., laser=...)``) is localised by that scan,
+    with ``laser_sigmas`` (0.5 deg, 2 cm: the legs of a table pin its position too).
     """
 
     def __init__(
@@ -811,6 +813,7 @@ class IncrementalPoseGraph:
         reference_sigmas: Any = sigmas6(math.radians(1.0), 0.1),
         min_reference_fit: float = 0.3,
         reference_search: tuple[float, float] = (0.15, math.radians(4.0)),
+        laser_sigmas: Any = sigmas6(math.radians(0.5), 0.02),
     ) -> None:
         self.graph = PoseGraph(robust=robust, robust_k=robust_k)
         self.gate = gate
@@ -828,6 +831,8 @@ class IncrementalPoseGraph:
         self.reference_sigmas = reference_sigmas
         self.min_reference_fit = float(min_reference_fit)
         self.reference_search = (float(reference_search[0]), float(reference_search[1]))
+        self.laser_sigmas = laser_sigmas
+        self.lasers: list[Points3 | None] = []  # per node: base laser points (sensor frame), if any
         self.mapped = False  # the newest node's estimate came from Plane ICP against the earlier views
         self.localised: list[int] = []  # nodes with an absolute factor from the reference
         self.odometry_sigmas = odometry_sigmas
@@ -845,11 +850,15 @@ class IncrementalPoseGraph:
     def __len__(self) -> int:
         return len(self.believed)
 
-    def add(self, scan: Scan | Points3, believed: Pose | None = None, odometry_sigmas: Any | None = None) -> np.ndarray:
+    def add(self, scan: Scan | Points3, believed: Pose | None = None, odometry_sigmas: Any | None = None,
+            laser: Points3 | None = None) -> np.ndarray:
         """Add a scan (world points at ``believed``, default its own pose); all corrected poses.
 
         ``odometry_sigmas`` (6,) is the uncertainty of the motion since the previous scan
-        (default: the graph's ``odometry_sigmas``).
+        (default: the graph's ``odometry_sigmas``). ``laser``: the base's planar localisation
+        scan taken with it, in the scan's sensor frame; it joins the upright points the views
+        are registered with, and alone localises the view in the map (AMCL-like: it sees the
+        table legs and walls, which a camera looking down at a table top does not).
         """
         if believed is None:
             if not isinstance(scan, Scan):
@@ -871,8 +880,10 @@ class IncrementalPoseGraph:
             self.graph.add_odometry(i - 1, i, invert(self.believed[-1]) @ believed, sigmas)
         self.believed.append(believed)
         self.pyramids.append(_pyramid(points, self.voxel, self.scales))
+        self.lasers.append(None if laser is None else _as_points(laser, "laser points"))
         if self.plane is not None:
-            self.points.append(self._upright_points(points, believed))
+            upright = self._upright_points(points, believed)
+            self.points.append(upright if laser is None else np.vstack([upright, self.lasers[-1]]))
         if i == 0:
             self.poses = self.graph.optimize(self.max_iterations)
             if self._localise(0, self.poses):
@@ -919,10 +930,14 @@ class IncrementalPoseGraph:
         The window is narrow on purpose: a table is symmetric, and its front edge seen from
         one side fits its back edge as well; the graph's estimate (views registered to each
         other) is good to a few cm, so only the map's correction of the slow drift is searched.
+        A view with a base laser scan is matched by that scan alone (it sees the map, legs and
+        walls, and no objects) and the factor gets the tighter ``laser_sigmas``.
         """
-        if self.reference is None or self.plane is None or self.field is None or len(self.points[i]) < 20:
+        laser = self.lasers[i] is not None and len(self.lasers[i]) >= 20
+        local = self.lasers[i] if laser else self.points[i]
+        if self.reference is None or self.plane is None or self.field is None or len(local) < 20:
             return False
-        src = transform_points(estimate[i], self.points[i])
+        src = transform_points(estimate[i], local)
         sigmas = self._sigmas(i)  # 3 sigma of the estimate, at least reference_search, at most 0.8 m, 20 deg
         search = (float(np.clip(3.0 * np.linalg.norm(sigmas[3:5]), self.reference_search[0], 0.8)),
                   float(np.clip(3.0 * sigmas[2], self.reference_search[1], math.radians(20.0))))
@@ -934,7 +949,8 @@ class IncrementalPoseGraph:
         if result.fitness < self.min_reference_fit or not _moves_within(
                 result.transformation, estimate[i], (search[0] + 0.05, search[1] + math.radians(1.0))):
             return False
-        self.graph.add_prior(i, result.transformation @ estimate[i], self.reference_sigmas)
+        sigmas = self.laser_sigmas if laser else self.reference_sigmas
+        self.graph.add_prior(i, result.transformation @ estimate[i], sigmas)
         self.localised.append(i)
         return True
 

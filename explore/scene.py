@@ -331,7 +331,8 @@ class SceneSession:
         self._timed("scan_s", start)
         if self.graph is not None:
             start = time.perf_counter()
-            self._apply(self.graph.add(scan, view.believed, self.mover.odometry_sigmas()))
+            self._apply(self.graph.add(scan, view.believed, self.mover.odometry_sigmas(),
+                                       self.mover.laser_points(true_pose, self.rng_sensor)))
             self._timed("registration_s", start)
         else:
             self.pvs.integrate(scan)

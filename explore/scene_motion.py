@@ -26,7 +26,7 @@ import numpy as np
 
 from .geometry import invert
 from .scan import ScanPath
-from .typed import Array, Pose
+from .typed import Array, Points3, Pose
 
 Target = Pose | ScanPath
 
@@ -71,8 +71,11 @@ class Mover:
     ----------
     sim : Simulation with robot and sensor attached
     registry : plugin registry (for the motion planner)
-    planner : motion-planner plugin name (default ``rrt_connect``; the free flyer moves in a
-        straight line)
+    planner : motion-planner plugin name; default ``tuck_and_drive`` for an arm on a base
+        (a robot with ``travel_joints``: the base drives only with the arm tucked, so its
+        odometry drifts only while it drives; RRT-Connect in the full 10-D space finds no
+        path among furniture, benchmarks/planners.py), else ``rrt_connect`` (an arm; the mobile
+        base's pan-tilt head); the free flyer moves in a straight line
     noise : execute with the robot's positioning noise
     occupied_from : PVS probability from which a robot point counts as colliding
     seed : seeds IK restarts and the execution noise
@@ -95,7 +98,8 @@ class Mover:
         self.free_flyer = self.robot is None or self.robot.name == "free_flyer"
         self.planner = None
         if not self.free_flyer:
-            self.planner = registry.create("motion_planner", planner or "rrt_connect",
+            default = "tuck_and_drive" if hasattr(self.robot, "travel_joints") else "rrt_connect"
+            self.planner = registry.create("motion_planner", planner or default,
                                            {"time_limit": planning_time}, "<scene>")
         self.base_dofs: tuple[int, ...] = tuple(getattr(self.robot, "base_dofs", ()) or ())
         self.believed_q: Array | None = None if self.robot is None else np.asarray(self.robot.q, dtype=float).copy()
@@ -154,6 +158,26 @@ class Mover:
             return target, list(ik.configs)
         q = robot.ik(np.asarray(target, dtype=float), self.rng)
         return None if q is None else (target, [q])
+
+    def laser_points(self, frame: Pose, rng: np.random.Generator, beams: int = 720) -> Points3 | None:
+        """A planar 360-degree scan of the base's localisation laser (robot parameter
+        ``laser_height`` > 0) at the base's true pose, in ``frame`` (the true sensor pose the
+        view's scan is recorded at: the arm joints are measured, so the robot knows where its
+        laser is relative to its camera); None without a laser. Görner's robot localises
+        with such a scanner (AMCL)."""
+        height = float(getattr(self.robot, "laser_height", 0.0) or 0.0)
+        if not self.base_dofs or height <= 0.0:
+            return None
+        ix, iy, ith = self.base_dofs
+        q = np.asarray(self.robot.q, dtype=float)
+        angles = q[ith] + np.linspace(0.0, 2.0 * math.pi, beams, endpoint=False)
+        directions = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(beams)])
+        origins = np.tile([q[ix], q[iy], height], (beams, 1))
+        distance, _, _ = self.sim.raycaster.cast(origins, directions)
+        hit = np.isfinite(distance) & (distance <= float(self.robot.laser_range))
+        measured = distance[hit] + rng.normal(0.0, float(self.robot.laser_sigma), int(hit.sum()))
+        world = origins[hit] + directions[hit] * measured[:, None]
+        return (world - frame[:3, 3]) @ frame[:3, :3]
 
     # -- motion ----------------------------------------------------------------------------
     def _problem(self) -> Any:

@@ -14,6 +14,7 @@ part of the ground truth the sensors cast rays against (``sim.raycaster``).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -443,7 +444,8 @@ class _BulletRobot(Robot):
         """(k, nc) True where a control error is sampled: every control of a group (the base, a
         joint) at the steps that command that group to move. A part commanded to stand still
         does not drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
-        controls = np.asarray(controls, dtype=float).reshape(len(controls), -1)
+        n_controls = self.n_base_controls + len(self.joint_dofs)
+        controls = np.asarray(controls, dtype=float).reshape(len(controls), n_controls)  # (0, n) for a plan in place
         moving = np.abs(controls) > 1e-12
         for group in self.noise_groups():
             moving[:, group] = moving[:, group].any(axis=1, keepdims=True)
@@ -573,6 +575,10 @@ _BASE = (
     Param("base_turn_speed", float, 0.5, "rad/s", "nominal base turn rate", low=1e-3),
     Param("sigma_v", float, SIGMA_V, "m/s", "noise sigma of linear velocity (Vasquez-Gomez: 1.65 mm/s)", low=0.0),
     Param("sigma_w", float, SIGMA_W, "rad/s", "noise sigma of angular velocity (Vasquez-Gomez: 0.28 rad/s)", low=0.0),
+    Param("laser_height", float, 0.0, "m", "planar 360-degree localisation laser on the base at this height (0: none)",
+          low=0.0),
+    Param("laser_range", float, 4.0, "m", "base laser range", low=0.1),
+    Param("laser_sigma", float, 0.01, "m", "base laser range noise sigma", low=0.0),
 )
 
 
@@ -784,6 +790,8 @@ class MobileManipulator(_BulletRobot):
         Param("home", list, [0.0, -0.3, 0.0, -1.9, 0.0, 1.0, 0.0], "rad", "arm travel configuration", length=7),
         Param("weights", list, [10.0, 10.0, 0.5] + [0.05] * 7, "", "Eq. 8 weights (Vasquez-Gomez)", length=10),
         Param("reach", list, [0.35, 0.9], "m", "IK samples the base this far from the sensor (xy)", length=2),
+        Param("keep_base", bool, False, "", "IK tries the current base pose first, then sampled ones nearest first "
+              "(else sampled ones in the order drawn)"),
         *_BASE,
         *_COMMON,
     )
@@ -860,26 +868,16 @@ class MobileManipulator(_BulletRobot):
         seed: Array | None = None,
         check_collision: bool = True,
     ) -> Array | None:
-        """Sample base poses facing the target (``reach``), then arm IK; None if unreachable."""
+        """Arm IK from base poses sampled facing the target (``reach``; with ``keep_base`` the
+        current base first, then the nearest: a base that stays put keeps its odometry); None
+        if unreachable."""
         rng = rng or np.random.default_rng(0)
         target = world_T_sensor @ np.linalg.inv(self.flange_T_sensor)
-        attempts = 1 if seed is not None else self.ik_attempts
-        view = world_T_sensor[:2, 2]
-        away = math.atan2(-view[1], -view[0]) if np.linalg.norm(view) > 1e-6 else rng.uniform(-math.pi, math.pi)
-        for _ in range(attempts):
-            if seed is not None:
-                base, q0 = np.asarray(seed[:3], dtype=float), np.asarray(seed[3:], dtype=float)
-            else:
-                angle = away + rng.uniform(-1.0, 1.0)
-                r = rng.uniform(*self.reach)
-                bx, by = world_T_sensor[0, 3] + r * math.cos(angle), world_T_sensor[1, 3] + r * math.sin(angle)
-                heading = math.atan2(world_T_sensor[1, 3] - by, world_T_sensor[0, 3] - bx) + rng.uniform(-0.3, 0.3)
-                base = np.array([bx, by, heading])
-                q0 = (
-                    np.asarray(self.home, dtype=float)
-                    if rng.random() < 0.5
-                    else rng.uniform(self.chain.lower, self.chain.upper)
-                )
+        if seed is not None:
+            starts = [(np.asarray(seed[:3], dtype=float), np.asarray(seed[3:], dtype=float))]
+        else:
+            starts = self._ik_starts(world_T_sensor, rng)
+        for base, q0 in starts:
             self.set_config(np.concatenate([base, q0]))
             self._state = None
             arm = self.chain.ik(target, q0) if seed is None else self.chain.refine(target, q0.copy())
@@ -891,6 +889,40 @@ class MobileManipulator(_BulletRobot):
                 continue
             return q
         return None
+
+    def _drawn_starts(self, world_T_sensor: Pose, away: float, home: Array,
+                      rng: np.random.Generator) -> Iterator[tuple[Array, Array]]:
+        for _ in range(self.ik_attempts):
+            angle = away + rng.uniform(-1.0, 1.0)
+            r = rng.uniform(*self.reach)
+            bx, by = world_T_sensor[0, 3] + r * math.cos(angle), world_T_sensor[1, 3] + r * math.sin(angle)
+            heading = math.atan2(world_T_sensor[1, 3] - by, world_T_sensor[0, 3] - bx) + rng.uniform(-0.3, 0.3)
+            yield np.array([bx, by, heading]), home if rng.random() < 0.5 else rng.uniform(self.chain.lower,
+                                                                                          self.chain.upper)
+
+    def _ik_starts(self, world_T_sensor: Pose, rng: np.random.Generator) -> Iterable[tuple[Array, Array]]:
+        """(base, arm seed) pairs for IK: ``ik_attempts`` bases ``reach`` from the sensor on its
+        far side, facing it; with ``keep_base`` the current base (travel arm) first and the
+        sampled ones ordered by the Eq. 8 weighted distance from it (a base that stays put
+        keeps its odometry), else in the order drawn."""
+        home = np.asarray(self.home, dtype=float)
+        view = world_T_sensor[:2, 2]
+        away = math.atan2(-view[1], -view[0]) if np.linalg.norm(view) > 1e-6 else rng.uniform(-math.pi, math.pi)
+        if not self.keep_base:  # drawn one by one: IK stops drawing at the first success
+            return self._drawn_starts(world_T_sensor, away, home, rng)
+        here = np.asarray(self.q[:3], dtype=float)
+        n = self.ik_attempts
+        angle = away + rng.uniform(-1.0, 1.0, n)
+        r = rng.uniform(*self.reach, n)
+        bx = world_T_sensor[0, 3] + r * np.cos(angle)
+        by = world_T_sensor[1, 3] + r * np.sin(angle)
+        heading = np.arctan2(world_T_sensor[1, 3] - by, world_T_sensor[0, 3] - bx) + rng.uniform(-0.3, 0.3, n)
+        seeds = [home if rng.random() < 0.5 else rng.uniform(self.chain.lower, self.chain.upper) for _ in range(n)]
+        turn = np.angle(np.exp(1j * (heading - here[2])))
+        w = np.asarray(self.weights[:3], dtype=float)
+        cost = w[0] * np.abs(bx - here[0]) + w[1] * np.abs(by - here[1]) + w[2] * np.abs(turn)
+        order = np.argsort(cost, kind="stable")
+        return [(here, home)] + [(np.array([bx[i], by[i], heading[i]]), seeds[i]) for i in order]
 
 
 class MobileBase(_BulletRobot):

@@ -101,6 +101,24 @@ def test_mobile_manipulator_ik_round_trip(registry) -> None:
         assert not robot.in_collision(q)
 
 
+def test_mobile_manipulator_ik_keeps_its_base_when_the_arm_reaches(registry) -> None:
+    """With ``keep_base`` (on in scene_small_mm) IK tries the current base first (a base that
+    stays put keeps its odometry); a pose beyond the arm's reach moves the base; a plan that
+    stays in place executes as a no-op."""
+    with Simulation("scene_small_mm", registry) as sim:
+        robot = sim.robot
+        here = robot.q.copy()
+        rng = np.random.default_rng(6)
+        near = robot.ik(look_at([0.0, -0.75, 1.25], [0.0, 0.0, 0.65]), rng)
+        assert near is not None and np.allclose(near[:3], here[:3])
+        far = robot.ik(look_at([0.0, 0.75, 1.25], [0.0, 0.0, 0.65]), rng)  # across the table
+        assert far is not None and np.linalg.norm(far[:2] - here[:2]) > 1.0
+        robot.q = here
+        robot.set_config(here)
+        run = robot.execute(MotionPlan(here[None, :]), rng)
+        assert len(run.controls) == 0 and np.allclose(run.final, here)
+
+
 def test_noise_statistics_match_the_model(two_tables) -> None:
     """sigma_v = 1.65 mm/s, sigma_w = 0.28 rad/s, truncated at 3 sigma (Vasquez-Gomez Sec. A6)."""
     robot = two_tables.robot
