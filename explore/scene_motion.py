@@ -184,8 +184,11 @@ class Mover:
         from .motion import MotionProblem
 
         pvs, limit = self.pvs, self.occupied_from
-        space_free = None if pvs is None else (lambda points: pvs.probability(points) < limit)
-        return MotionProblem(self.robot, space_free=space_free)
+        if pvs is None:
+            return MotionProblem(self.robot)
+        # outside its grid the PVS answers 0.5 (free here): only robot parts near the grid are tested
+        return MotionProblem(self.robot, space_free=lambda points: pvs.probability(points) < limit,
+                             space_bounds=(pvs.min_corner, pvs.max_corner))
 
     def move(self, target: Target, configs: list | None = None) -> Move | None:
         """Go to ``target`` (IK unless ``configs`` from :meth:`reach` is given); None if impossible."""
@@ -243,20 +246,45 @@ class Mover:
         self.travel_m += travel
         return Move(target, start.copy(), travel, 0.0, 0, "straight_line")
 
-    def _recover(self, problem: Any) -> None:
+    def _recover(self, problem: Any, attempts: int = 3) -> None:
         """If noise left the robot closer to an obstacle than its planning clearance (planning
-        would refuse to start), drive straight back along the last motion to the first
-        configuration that is valid again."""
-        if problem.is_valid(self.robot.q) or self._last_path is None:
-            return
-        for q in self._last_path[::-1]:
-            if problem.is_valid(q):
-                start = np.asarray(self.robot.q, dtype=float).copy()
-                execution = self.robot.execute(np.vstack([start, q]), self.rng, noise=self.noise, world="true")
-                self.collisions += len(execution.collisions)
-                self._odometry(start, execution)
-                self._back_off(execution)
+        would refuse to start), move to a nearby configuration that is valid again: back along
+        the last motion, else (a base) straight back or forward along its heading. Each try
+        is executed with noise, so it is repeated while the robot is still too close."""
+        for _ in range(attempts):
+            if problem.is_valid(self.robot.q):
                 return
+            goal = self._escape(problem)
+            if goal is None:
+                return
+            start = np.asarray(self.robot.q, dtype=float).copy()
+            execution = self.robot.execute(np.vstack([start, goal]), self.rng, noise=self.noise, world="true")
+            self.collisions += len(execution.collisions)
+            self._odometry(start, execution)
+            self._back_off(execution)
+
+    def _escape(self, problem: Any) -> Array | None:
+        """The latest valid configuration of the last motion, else (a base) the nearest base
+        shift along the heading (2-20 cm) that is valid, with twice the clearance if it can."""
+        for candidate in [] if self._last_path is None else self._last_path[::-1]:
+            if problem.is_valid(candidate):
+                return candidate
+        if not self.base_dofs:
+            return None
+        q = np.asarray(self.robot.q, dtype=float)
+        ix, iy, ith = self.base_dofs
+        axis = np.array([math.cos(q[ith]), math.sin(q[ith])])
+        shifts = []
+        for step in (0.02, 0.05, 0.1, 0.2):
+            for sign in (-1.0, 1.0):
+                shifted = q.copy()
+                shifted[[ix, iy]] += sign * step * axis
+                shifts.append(shifted)
+        for margin in (2.0 * problem.margin, problem.margin):
+            for candidate in shifts:
+                if problem.is_valid(candidate, margin=margin):
+                    return candidate
+        return None
 
     def _accumulate(self, execution: Any) -> None:
         """Grow the odometry variance by a motion's control noise (the robot plugin's sigmas):
