@@ -531,23 +531,41 @@ class PoseGraph:
         self.edges.append(Edge(i, j, _as_pose(relative).copy(), kind, fitness))
 
     def optimize(self, max_iterations: int = 100) -> np.ndarray:
-        """Corrected world_T_sensor poses (n, 4, 4) after Levenberg-Marquardt."""
+        """Corrected world_T_sensor poses (n, 4, 4) after Levenberg-Marquardt.
+
+        LM starts from the odometry and, when the graph was solved before, also from that
+        solution (new nodes chained on by odometry, as an incremental solver would); the warm
+        start wins if its final error is lower by more than 1 %. From odometry alone LM can
+        stall: with a base a metre off no step lowers the error, and the odometry comes back.
+        """
         import gtsam
 
         if not self.initial:
             return np.zeros((0, 4, 4))
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        graph = gtsam.NonlinearFactorGraph()
         for factor in self._factors:
             graph.add(factor)
         x = gtsam.symbol_shorthand.X
-        for i, pose in enumerate(self.initial):
-            values.insert(x(i), gtsam.Pose3(pose))
+        starts = [self.initial]
+        if self._solution is not None:
+            solved = self._solution[1]
+            warm = [solved.atPose3(x(i)).matrix() for i in range(len(self.initial)) if solved.exists(x(i))]
+            for pose in self.initial[len(warm):]:
+                warm.append(warm[-1] @ invert(self.initial[len(warm) - 1]) @ pose)
+            starts.append(warm)
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(int(max_iterations))
-        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
-        self.error = (graph.error(values), graph.error(result))
-        self._solution = (graph, result)
-        return np.stack([result.atPose3(x(i)).matrix() for i in range(len(self.initial))])
+        best = None
+        for start in starts:
+            values = gtsam.Values()
+            for i, pose in enumerate(start):
+                values.insert(x(i), gtsam.Pose3(pose))
+            result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+            if best is None or graph.error(result) < 0.99 * graph.error(best[1]):
+                best = (values, result)
+        self.error = (graph.error(best[0]), graph.error(best[1]))
+        self._solution = (graph, best[1])
+        return np.stack([best[1].atPose3(x(i)).matrix() for i in range(len(self.initial))])
 
     def sigmas(self, index: int) -> Array:
         """Marginal standard deviations (gtsam ``Pose3`` tangent order, body frame) of node
