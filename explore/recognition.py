@@ -460,14 +460,18 @@ def model_cloud(mesh: TriMesh, sampling: float, views: int = 24, normal_radius: 
     rendered = render_views(mesh, fibonacci_sphere(views), resolution=96, normal_radius=normal_radius)
     pts = np.vstack([v.points for v in rendered])
     nrm = np.vstack([v.normals for v in rendered])
-    dense = _o3d_cloud(pts, nrm).voxel_down_sample(0.003)
-    sampled = _o3d_cloud(pts, nrm).voxel_down_sample(sampling)
-    dn = np.asarray(dense.normals)
-    sn = np.asarray(sampled.normals)
-    return ModelCloud(
-        np.asarray(dense.points).copy(), dn / np.maximum(np.linalg.norm(dn, axis=1, keepdims=True), 1e-12),
-        np.asarray(sampled.points).copy(), sn / np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12),
-    )
+    dense = _oriented(_o3d_cloud(pts, nrm).voxel_down_sample(0.003))
+    sampled = _oriented(_o3d_cloud(pts, nrm).voxel_down_sample(sampling))
+    return ModelCloud(*dense, *sampled)
+
+
+def _oriented(cloud: Any) -> tuple[Points3, Points3]:
+    """Points and unit normals of an Open3D cloud, without the points whose normal vanished
+    (a voxel average of opposite normals on a thin wall): they have no pair feature (PPF)."""
+    points, normals = np.asarray(cloud.points), np.asarray(cloud.normals)
+    length = np.linalg.norm(normals, axis=1)
+    keep = np.isfinite(length) & (length > 1e-6)
+    return points[keep].copy(), normals[keep] / length[keep, None]
 
 
 class _RecognizerBase:
@@ -651,6 +655,7 @@ class PPFRecognizer(_RecognizerBase):
         if (stored is not None and stored[1] == self.descriptor_params() and stored[0].ndim == 2
                 and stored[0].shape[1] == 7):
             arr = stored[0]
+            arr = arr[np.linalg.norm(arr[:, 3:6], axis=1) > 1e-6]  # stored before vanished normals were dropped
             s, d = arr[arr[:, 6] > 0.5], arr[arr[:, 6] <= 0.5]
             cloud = ModelCloud(d[:, :3], d[:, 3:6], s[:, :3], s[:, 3:6])
         else:
@@ -687,9 +692,7 @@ class PPFRecognizer(_RecognizerBase):
         started = time.perf_counter()
         table = self.table(model)
         scene = _o3d_cloud(cluster.points, cluster.normals).voxel_down_sample(table.distance_step)
-        sp = np.asarray(scene.points)
-        sn = np.asarray(scene.normals)
-        sn = sn / np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
+        sp, sn = _oriented(scene)
         if len(sp) < 5:
             return []
         rng = np.random.default_rng(self.seed)

@@ -86,6 +86,24 @@ def test_local_recognisers_recover_duck_pose(registry, scene, method):
     assert {h.model for h in recognizer.accept(hypotheses)} == {"duck"}
 
 
+def test_ppf_ignores_points_whose_normal_vanished(scene):
+    """A voxel average of opposite normals (a thin wall seen from both sides) is a zero normal;
+    such points have no pair feature. With a fifth of the duck's normals zero or NaN, PPF still
+    finds the duck within 5 mm / 2 deg (it used to vote with NaN features and crash in the pose
+    averaging: "SVD did not converge")."""
+    import dataclasses
+
+    scan, clusters, models, truth = scene
+    cluster = clusters["duck"]
+    normals = cluster.normals.copy()
+    normals[::5] = 0.0
+    normals[1::25] = np.nan
+    broken = dataclasses.replace(cluster, normals=normals)
+    hypotheses = PPFRecognizer().recognize(broken, models, scan)
+    assert all(np.all(np.isfinite(h.pose)) for h in hypotheses)
+    _check_top(hypotheses, truth, "duck")
+
+
 def test_ppf_ranks_right_model_on_most_clusters(scene):
     scan, clusters, models, truth = scene
     recognizer = PPFRecognizer()
