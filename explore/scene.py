@@ -603,21 +603,34 @@ class SceneSession:
         return obj.fused
 
     def next_view(self, obj: SceneObject, purpose: str) -> View | None:
-        """Take the reachable view of ``obj`` farthest (in angle) from the views that saw it."""
+        """Take the reachable view of ``obj`` farthest (in angle) from the views that saw it.
+
+        A direction the robot cannot reach at the viewing distance is tried nearer (3/4, 1/2 of
+        it, not below the sensor's near limit): an arm reaches a steep view from closer. A view
+        that fails to plan gives way to the next one; ``2 * reach_tries`` directions are tried.
+        """
         centre = obj.cluster.centroid
         lo, hi = obj.cluster.aabb
-        distance = viewing_distance(self.sim.sensor, float(np.linalg.norm(hi - lo)))
-        poses, _ = views_around(centre, distance, camera_height=getattr(self.sim.robot, "camera_height", None))
+        extent = float(np.linalg.norm(hi - lo))
+        distance = viewing_distance(self.sim.sensor, extent)
+        near = viewing_distance(self.sim.sensor, extent, far=0.0)
+        ladder = [d for d in (distance, 0.75 * distance, 0.5 * distance) if d >= near] or [distance]
+        height = getattr(self.sim.robot, "camera_height", None)
+        rings = [views_around(centre, d, camera_height=height)[0] for d in ladder]
         seen = np.array([self.views[v].believed[:3, 3] for v in obj.cluster.view_ids])
-        tried = 0
-        for index in order_by_novelty(poses, seen, centre):
-            if not self.mover.plausible(poses[index][:3, 3], centre):
+        directions = 0
+        for index in order_by_novelty(rings[0], seen, centre):
+            if not self.mover.plausible(rings[0][index][:3, 3], centre):
                 continue
-            reached = self.mover.reach(as_target(self.sim.sensor, poses[index], obj.cluster.points, distance))
-            tried += 1
-            if reached is not None:
-                return self.add_view(reached[0], purpose, obj.id, reached[1])
-            if tried >= 2 * self.reach_tries:
+            directions += 1
+            for d, ring in zip(ladder, rings, strict=True):
+                reached = self.mover.reach(as_target(self.sim.sensor, ring[index], obj.cluster.points, d))
+                if reached is not None:
+                    view = self.add_view(reached[0], purpose, obj.id, reached[1])
+                    if view is not None or self.budget_left <= 0:
+                        return view
+                    break
+            if directions >= 2 * self.reach_tries:
                 break
         return None
 
@@ -758,7 +771,7 @@ class SceneSession:
             candidate = session.select()
             if candidate is None:
                 break
-            if not self.mover.plausible(target_start(candidate.target)[:3, 3], centre):
+            if not self.mover.plausible(target_start(candidate.target)[:3, 3], centre) or self._taken(candidate.target):
                 continue
             tries += 1
             reached = self.mover.reach(candidate.target)
@@ -790,6 +803,18 @@ class SceneSession:
         if self.budget_left <= 0:
             return True
         return False
+
+    def _taken(self, target: Target, eye_tol: float = 0.02, angle_tol_deg: float = 5.0) -> bool:
+        """A view was already taken from (about) ``target``'s pose: in a static scene it would
+        show the same surface again (an NBS utility that cannot see why its gain never comes
+        would otherwise pick it over and over)."""
+        if not self.views:
+            return False
+        pose = target_start(target)
+        taken = np.array([v.recorded for v in self.views])
+        near = np.linalg.norm(taken[:, :3, 3] - pose[:3, 3], axis=1) <= eye_tol
+        aligned = taken[:, :3, 2] @ pose[:3, 2] >= math.cos(math.radians(angle_tol_deg))
+        return bool(np.any(near & aligned))
 
     def finish_modelling(self, obj: SceneObject) -> str | None:
         """Turn the modelled surface into a database object (iterative recognition); its name."""
