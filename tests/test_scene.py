@@ -194,7 +194,7 @@ def test_close_holes_caps_an_open_box():
 
 
 def test_base_laser_sees_the_table_legs_and_localises_a_view(registry):
-    """The mobile manipulator's planar base laser hits the known table legs (its points, put back
+    """The mobile manipulator's planar base laser hits the known walls and table legs (its points, put back
     in the world at the true sensor pose, lie on the map). The overview camera view sees only the
     table top and its objects, nothing of the map, so it cannot be localised when its odometry is
     0.25 m and 8° off; with the laser scan taken with it, it is (within 2 cm / 1°)."""
@@ -284,7 +284,7 @@ def _explore_scene(registry, tmp_path, tree: str, world: str) -> tuple[dict, Pat
 
 @pytest.mark.slow
 def test_scene_exploration_with_the_mobile_manipulator(registry, tmp_path):
-    """The mobile manipulator (tuck and drive, base laser on the table legs): every cluster is
+    """The mobile manipulator (tuck and drive, base laser on the walls and table legs): every cluster is
     explained, the pose graph at least halves the base's odometry error, and the known objects are
     recognised within 2° and, in the world, within 5 mm plus twice the remaining mean localisation
     error (each view is localised by its own laser scan, so the views' errors differ and no single
