@@ -465,13 +465,18 @@ def model_cloud(mesh: TriMesh, sampling: float, views: int = 24, normal_radius: 
     return ModelCloud(*dense, *sampled)
 
 
-def _oriented(cloud: Any) -> tuple[Points3, Points3]:
-    """Points and unit normals of an Open3D cloud, without the points whose normal vanished
-    (a voxel average of opposite normals on a thin wall): they have no pair feature (PPF)."""
-    points, normals = np.asarray(cloud.points), np.asarray(cloud.normals)
+def _has_normal(normals: Points3) -> np.ndarray:
+    """Rows whose normal did not vanish (a voxel average of opposite normals on a thin wall is
+    zero): only they have a pair feature (PPF)."""
     length = np.linalg.norm(normals, axis=1)
-    keep = np.isfinite(length) & (length > 1e-6)
-    return points[keep].copy(), normals[keep] / length[keep, None]
+    return np.isfinite(length) & (length > 1e-6)
+
+
+def _oriented(cloud: Any) -> tuple[Points3, Points3]:
+    """Points and unit normals of an Open3D cloud, without the points whose normal vanished."""
+    points, normals = np.asarray(cloud.points), np.asarray(cloud.normals)
+    keep = _has_normal(normals)
+    return points[keep].copy(), normals[keep] / np.linalg.norm(normals[keep], axis=1, keepdims=True)
 
 
 class _RecognizerBase:
@@ -655,7 +660,7 @@ class PPFRecognizer(_RecognizerBase):
         if (stored is not None and stored[1] == self.descriptor_params() and stored[0].ndim == 2
                 and stored[0].shape[1] == 7):
             arr = stored[0]
-            arr = arr[np.linalg.norm(arr[:, 3:6], axis=1) > 1e-6]  # stored before vanished normals were dropped
+            arr = arr[_has_normal(arr[:, 3:6])]  # stored before vanished normals were dropped
             s, d = arr[arr[:, 6] > 0.5], arr[arr[:, 6] <= 0.5]
             cloud = ModelCloud(d[:, :3], d[:, 3:6], s[:, :3], s[:, 3:6])
         else:
