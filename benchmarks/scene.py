@@ -320,6 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")
     args = parser.parse_args(argv)
+    from explore.planning_clock import work_clock
     from explore.registry import Registry
 
     registry = Registry.load()
@@ -327,7 +328,8 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict[str, Any]] = []
     for part in parts:
         _log(args, f"# {part}")
-        rows.extend(PARTS[part](args, registry))
+        with work_clock():  # planning limits in work done: the same seed gives the same rows under any load
+            rows.extend(PARTS[part](args, registry))
     if args.json:
         print(json.dumps(rows, indent=1))
     else:

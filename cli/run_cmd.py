@@ -64,6 +64,9 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/...).")] = None,
         rerun: Annotated[Path | None, typer.Option("--rerun", help="Also log to a Rerun .rrd file.")] = None,
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view.")] = False,
+        planning_clock: Annotated[str, typer.Option(
+            "--planning-clock", help="Motion-planning time limits in 'work' done (the same seed gives the same "
+            "run under any CPU load) or 'wall' time.")] = "work",
     ) -> int:
         """Run an exploration tree on a world; exit 0 on success, 1 if the mission failed."""
         from rich.live import Live
@@ -75,6 +78,7 @@ def register(app: typer.Typer) -> None:
         config = RunConfig(
             tree=tree, world=world, strategy=strategy, planner=planner, robot=robot, sensor=sensor, seed=seed,
             max_scans=max_scans, settings=RunConfig.parse_settings(set_ or []), out=out, rerun=rerun,
+            planning_clock=planning_clock,
         )
         reg = registry()
         interactive = console.is_terminal and not quiet

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .planning_clock import Budget, charge
 from .typed import Array, Points3, Pose
 
 if TYPE_CHECKING:
@@ -328,6 +329,7 @@ class MotionProblem:
     def is_valid(self, q: Array, margin: float | None = None) -> bool:
         """Validity of one configuration (limits, known environment, self, free space)."""
         self.checks += 1
+        charge("state")
         q = np.asarray(q, dtype=float)
         if np.any(q < self.lower - 1e-9) or np.any(q > self.upper + 1e-9):
             return False
@@ -421,17 +423,17 @@ def path_is_valid(
 def check_path_until(
     problem: MotionProblem,
     path: np.ndarray,
-    deadline: float | None,
+    budget: Budget | None,
     resolution: float | None = None,
     margin: float | None = 0.0,
 ) -> bool | None:
-    """Dense check in bisection order that gives up at ``deadline`` (``time.perf_counter``).
+    """Dense check in bisection order that gives up when ``budget`` expires.
 
-    True: every state valid; False: an invalid state; None: the deadline passed first.
+    True: every state valid; False: an invalid state; None: the budget ran out first.
     """
     dense = _interpolate(path, resolution or problem.resolution)
     for count, i in enumerate(_bisection_order(len(dense))):
-        if deadline is not None and count % 8 == 0 and time.perf_counter() > deadline:
+        if budget is not None and count % 8 == 0 and budget.expired():
             return None
         if not problem.is_valid(dense[i], margin=margin):
             return False
@@ -524,8 +526,8 @@ def plan(
     ``problem.resolution`` (L2) with the clearance margin, as the robot executes it (a
     differential base turns, drives and turns: OMPL checks motions with that local planner,
     :func:`_executed_motion_validator`). ``time_limit`` bounds the whole call: the search,
-    the simplification, the re-check and the retry (wall time from entry; one validity
-    check may run past it).
+    the simplification, the re-check and the retry (seconds on the planning clock from
+    entry, :mod:`explore.planning_clock`; one validity check may run past it).
 
     Speed (``benchmarks/planners.py``): the first search checks motions every
     ``check_factor * problem.resolution`` with at most ``SOLVE_SHARE`` of the time, its result
@@ -537,29 +539,28 @@ def plan(
     0.1 s budget on an iiwa query whose answer is one straight segment.
     """
     t0 = time.perf_counter()
-    deadline = t0 + float(time_limit)
+    budget = Budget(time_limit)
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
     if not problem.is_valid(start) or not problem.is_valid(goal):
         return None
     if try_direct:  # the straight segment first (what simplification would return anyway)
-        direct = straight_line(problem, start, goal, deadline=deadline)
+        direct = straight_line(problem, start, goal, budget=budget)
         if direct is not None:
             direct.planner = planner
             direct.planning_time = time.perf_counter() - t0
             return direct
     factors = [max(1.0, float(check_factor))] + ([1.0] if check_factor > 1.0 else [])
     for attempt, factor in enumerate(factors):
-        remaining = deadline - time.perf_counter()
-        if remaining <= 0.0:
+        if budget.remaining() <= 0.0:
             break
         coarse = factor > 1.0
         seed_ompl(None if seed is None else seed + attempt)
-        budget = remaining * SOLVE_SHARE if coarse else remaining
-        path = _ompl_search(problem, start, goal, planner, budget, simplify, range, goal_threshold, factor, deadline)
+        search = budget.share(SOLVE_SHARE) if coarse else budget
+        path = _ompl_search(problem, start, goal, planner, search, simplify, range, goal_threshold, factor, budget)
         if path is None:
             continue  # coarse search gave up (e.g. only an approximate solution): try fine
         if coarse:  # OMPL checked every factor x resolution: check the rest now, within the limit
-            verdict = check_path_until(problem, problem.motion_path(path), deadline, margin=None)
+            verdict = check_path_until(problem, problem.motion_path(path), budget, margin=None)
             if verdict is None:
                 break
             if not verdict:
@@ -569,12 +570,12 @@ def plan(
     return None
 
 
-def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int, deadline: float | None) -> Any:
+def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int, budget: Budget | None) -> Any:
     """OMPL motion validator that checks the motion the robot executes (turn-drive-turn).
 
     A subclass of ``ompl.base.MotionValidator`` (the nanobind bindings call the Python
     ``checkMotion``), for robots whose ``execution_path`` differs from the straight segment
-    (a differential base). Past ``deadline`` every motion is invalid (the search winds down).
+    (a differential base). Once ``budget`` expires every motion is invalid (the search winds down).
     """
     ob, _, _ = _ompl()
 
@@ -583,7 +584,7 @@ def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int,
             qa = [a[i] for i in range(n)]
             qb = [b[i] for i in range(n)]
             path = problem.motion_path(np.array([qa, qb]))
-            return bool(check_path_until(problem, path, deadline, resolution, margin=None))
+            return bool(check_path_until(problem, path, budget, resolution, margin=None))
 
     return Validator(si)
 
@@ -593,17 +594,17 @@ def _ompl_search(
     start: Array,
     goal: Array,
     planner: str,
-    time_limit: float,
+    search: Budget,
     simplify: bool,
     step: float,
     goal_threshold: float,
     check_factor: float,
-    deadline: float | None = None,
+    budget: Budget | None = None,
 ) -> np.ndarray | None:
-    """One OMPL solve with motions checked every ``check_factor * problem.resolution``.
+    """One OMPL solve within ``search``, motions checked every ``check_factor * problem.resolution``.
 
     Simplification runs in rounds of 10 shortcut attempts until one round changes nothing or
-    ``deadline`` passes (the path is valid after every round).
+    ``budget`` (the whole call's) expires (the path is valid after every round).
     """
     ob, og, _ = _ompl()
     n = len(start)
@@ -615,13 +616,13 @@ def _ompl_search(
     si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
     probe = np.vstack([start, goal])
     if problem.motion_path(probe).shape != probe.shape:  # the robot does not drive straight segments
-        si.setMotionValidator(_executed_motion_validator(si, problem, resolution, n, deadline))
+        si.setMotionValidator(_executed_motion_validator(si, problem, resolution, n, budget))
     instance = planner_class(planner)(si)
     if step > 0 and hasattr(instance, "setRange"):
         instance.setRange(step)
     ss.setPlanner(instance)
     ss.setStartAndGoalStates(_state(space, start), _state(space, goal), goal_threshold)
-    status = ss.solve(max(1e-3, float(time_limit)))
+    status = ss.solve(search.ompl_condition())
     if not status or not ss.haveExactSolutionPath():
         return None
     solution = ss.getSolutionPath()
@@ -629,7 +630,7 @@ def _ompl_search(
         simplifier = og.PathSimplifier(si)
         for shortcut in (simplifier.reduceVertices, simplifier.collapseCloseVertices, simplifier.reduceVertices):
             # rounds of 10 shortcut attempts (each checks one motion) while time remains
-            while solution.getStateCount() > 2 and (deadline is None or time.perf_counter() < deadline):
+            while solution.getStateCount() > 2 and (budget is None or not budget.expired()):
                 if not shortcut(solution, 10, 10):
                     break
     path = np.array(
@@ -642,16 +643,16 @@ def _ompl_search(
 
 
 def straight_line(
-    problem: MotionProblem, start: Array, goal: Array, deadline: float | None = None
+    problem: MotionProblem, start: Array, goal: Array, budget: Budget | None = None
 ) -> MotionPlan | None:
     """The straight segment in configuration space if it is valid (the free flyer's planner).
 
     Checked as the robot executes it (``problem.motion_path``); None when invalid or when
-    ``deadline`` (``time.perf_counter``) passes before the check ends.
+    ``budget`` expires before the check ends.
     """
     t0 = time.perf_counter()
     path = np.vstack([start, goal]).astype(float)
-    if not check_path_until(problem, problem.motion_path(path), deadline, margin=None):
+    if not check_path_until(problem, problem.motion_path(path), budget, margin=None):
         return None
     return MotionPlan(path, planner="straight_line", planning_time=time.perf_counter() - t0,
                       length=path_length(problem.robot, problem.motion_path(path)))
@@ -731,6 +732,7 @@ class PlanarChecker:
     def __call__(self, qb: Array) -> bool:
         from .motion_kernels import planar_points_clearance
 
+        charge("planar")
         qb = np.asarray(qb, dtype=float)
         if np.any(qb < self.lower - 1e-9) or np.any(qb > self.upper + 1e-9):
             return False
@@ -775,7 +777,7 @@ class _BaseProblem:
         return self.problem.motion_path(self.full_path(np.asarray(path, dtype=float)))[:, self.base]
 
 
-def _joint_motion(problem: MotionProblem, a: Array, b: Array, deadline: float, seed: int | None) -> np.ndarray | None:
+def _joint_motion(problem: MotionProblem, a: Array, b: Array, budget: Budget, seed: int | None) -> np.ndarray | None:
     """Path moving only the non-base joints from ``a`` to ``b`` (straight if valid, else RRT-Connect).
 
     Found motions are remembered by the problem while its free space is unchanged (the tuck
@@ -787,12 +789,12 @@ def _joint_motion(problem: MotionProblem, a: Array, b: Array, deadline: float, s
     if key is not None and key in problem.motions:
         return problem.motions[key]
     path = np.vstack([a, b]).astype(float)
-    verdict = check_path_until(problem, path, deadline, margin=None)
+    verdict = check_path_until(problem, path, budget, margin=None)
     if verdict is None:
         return None
     if not verdict:
         pinned = problem.pinned(list(problem.robot.base_dofs), a)
-        sub = plan(pinned, a, b, "rrt_connect", time_limit=max(0.0, deadline - time.perf_counter()), seed=seed)
+        sub = plan(pinned, a, b, "rrt_connect", time_limit=max(0.0, budget.remaining()), seed=seed)
         if sub is None:
             return None
         path = sub.path
@@ -829,7 +831,7 @@ def _mobile_plan(
     problem: MotionProblem,
     start: Array,
     goal: Array,
-    drive: Callable[[_BaseProblem, Array, Array, float], tuple[np.ndarray, np.ndarray] | None],
+    drive: Callable[[_BaseProblem, Array, Array, Budget], tuple[np.ndarray, np.ndarray] | None],
     time_limit: float,
     seed: int | None,
     tuck: bool,
@@ -838,12 +840,12 @@ def _mobile_plan(
     """Joints to the carried values, the base by ``drive``, joints to the goal; one MotionPlan
     (only the joint motion when the base stays put).
 
-    ``drive(base_problem, start_base, goal_base, deadline)`` returns the base rollout (m + 1, 3)
+    ``drive(base_problem, start_base, goal_base, budget)`` returns the base rollout (m + 1, 3)
     at ``robot.dt`` and its base controls (m, nb), or None. The drive is checked by the
     planar checker, the joint motions with pybullet, all within ``time_limit``.
     """
     t0 = time.perf_counter()
-    deadline = t0 + float(time_limit)
+    budget = Budget(time_limit)
     robot = problem.robot
     base = list(robot.base_dofs)
     if not base:
@@ -855,7 +857,7 @@ def _mobile_plan(
     goal[th] = start[th] + _wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
     joints = [i for i in range(len(start)) if i not in base]
     if np.allclose(start[base], goal[base], atol=1e-9):  # the base stays put: only the joints move
-        path = _joint_motion(problem, start, goal, deadline, seed)
+        path = _joint_motion(problem, start, goal, budget, seed)
         if path is None:
             return None
         controls, rolled = robot.controls_from_path(path)
@@ -864,15 +866,15 @@ def _mobile_plan(
     lower, upper = problem.lower[base].copy(), problem.upper[base].copy()
     lower[2], upper[2] = start[th] - 2 * math.pi, start[th] + 2 * math.pi
     for values in _carried_joints(problem, start, goal, tuck):
-        if time.perf_counter() >= deadline:
+        if budget.expired():
             return None
         carried = start.copy()
         carried[joints] = values
-        first = _joint_motion(problem, start, carried, deadline, seed)
+        first = _joint_motion(problem, start, carried, budget, seed)
         if first is None:
             continue
         sub = _BaseProblem(problem, carried, lower, upper)
-        driven = drive(sub, carried[base], goal[base], deadline)
+        driven = drive(sub, carried[base], goal[base], budget)
         if driven is None:
             continue
         rollout, base_controls = driven
@@ -880,7 +882,7 @@ def _mobile_plan(
         reached[base] = rollout[-1]
         target = reached.copy()
         target[joints] = goal[joints]
-        last = _joint_motion(problem, reached, target, deadline, None if seed is None else seed + 1)
+        last = _joint_motion(problem, reached, target, budget, None if seed is None else seed + 1)
         if last is None:
             continue
         pieces, control_pieces = [start[None]], []
@@ -948,7 +950,7 @@ def plan_kinodynamic(
     robot = problem.robot
     dt = float(robot.dt)
 
-    def drive(sub: _BaseProblem, a: Array, b: Array, deadline: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def drive(sub: _BaseProblem, a: Array, b: Array, budget: Budget) -> tuple[np.ndarray, np.ndarray] | None:
         seed_ompl(seed)
         space = _space(ob, sub.lower, sub.upper)
         limits = robot.base_control_limits()  # (nb,) max |u| of the base controls
@@ -982,10 +984,9 @@ def plan_kinodynamic(
             instance.setGoalBias(float(goal_bias))
         ss.setPlanner(instance)
         ss.setStartAndGoalStates(_state(space, a), _state(space, b), goal_tolerance)
-        remaining = deadline - time.perf_counter()
-        if remaining <= 0.0:
+        if budget.remaining() <= 0.0:
             return None
-        status = ss.solve(max(1e-3, remaining * 0.8))  # the rest: the final joint motion and its check
+        status = ss.solve(budget.share(0.8).ompl_condition())  # the rest: the final joint motion and its check
         if not status or not ss.haveExactSolutionPath():
             return None
         solution = ss.getSolutionPath()
@@ -998,12 +999,12 @@ def plan_kinodynamic(
         for u in base_controls:
             rollout.append(robot.propagate_base(rollout[-1], u, dt))
         rollout = np.asarray(rollout)
-        if not check_path_until(sub, rollout, deadline):  # between the propagation steps too
+        if not check_path_until(sub, rollout, budget):  # between the propagation steps too
             return None
         if connect and np.linalg.norm(rollout[-1] - b) > 1e-9:  # close the gap with the robot's steering
             steer_controls, steered = robot.controls_from_path(sub.full_path(np.vstack([rollout[-1], b])))
             steered = steered[:, sub.base]
-            if len(steer_controls) and check_path_until(sub, sub.motion_path(steered), deadline):
+            if len(steer_controls) and check_path_until(sub, sub.motion_path(steered), budget):
                 rollout = np.vstack([rollout, steered[1:]])
                 base_controls = np.vstack([base_controls, steer_controls[:, :nc]])
         return rollout, base_controls
@@ -1032,12 +1033,11 @@ def plan_mobile(
     """
     robot = problem.robot
 
-    def drive(sub: _BaseProblem, a: Array, b: Array, deadline: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def drive(sub: _BaseProblem, a: Array, b: Array, budget: Budget) -> tuple[np.ndarray, np.ndarray] | None:
         seed_ompl(seed)
-        remaining = deadline - time.perf_counter()
-        if remaining <= 0.0:
+        if budget.remaining() <= 0.0:
             return None
-        path = _ompl_search(sub, a, b, planner, remaining * 0.8, simplify, 0.0, 1e-6, 1.0, deadline)
+        path = _ompl_search(sub, a, b, planner, budget.share(0.8), simplify, 0.0, 1e-6, 1.0, budget)
         if path is None:
             return None
         controls, rolled = robot.controls_from_path(sub.full_path(path))

@@ -11,6 +11,7 @@ The schema of ``metrics.json`` is documented in ``docs/metrics.md``.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import queue
@@ -28,8 +29,10 @@ import numpy as np
 
 from .errors import BadInput
 from .params import parse_assignment, validate_params
+from .planning_clock import work_clock
 
 METRICS_SCHEMA_VERSION = 1
+PLANNING_CLOCKS = ("work", "wall")
 _RUN_IDS = itertools.count(1)
 
 
@@ -49,6 +52,7 @@ class RunConfig:
     out: Path | None = None
     max_ticks: int = 100000
     rerun: Path | None = None  # --rerun FILE.rrd
+    planning_clock: str = "work"  # motion-planning time limits in work done (deterministic) or "wall" time
 
     @staticmethod
     def parse_settings(items: list[str]) -> dict[str, Any]:
@@ -294,7 +298,8 @@ def execute(
         _remove_run_files(out_dir, created)
         raise
     try:
-        status, reason, root = _tick(config, registry, context, tree_file, overrides, on_tick)
+        with work_clock() if config.planning_clock == "work" else contextlib.nullcontext():
+            status, reason, root = _tick(config, registry, context, tree_file, overrides, on_tick)
         from .run_outputs import write_outputs
 
         metrics = write_outputs(context, tree_file, root, status, reason)
@@ -406,6 +411,9 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
         scoped = config.scoped(prefixes[kind])
         if scoped:
             validate_params(info.params, scoped, "--set", f"{prefixes[kind]}.")
+    if config.planning_clock not in PLANNING_CLOCKS:
+        raise BadInput("--planning-clock", None,
+                       f"{config.planning_clock!r} is not one of {', '.join(PLANNING_CLOCKS)}")
     if config.rerun is not None:
         from .rerun_log import check_rerun
 

@@ -81,6 +81,7 @@ def write_outputs(context: RunContext, tree_file: Any, root: Any, status: str, r
         "strategy": config.strategy,
         "planner": config.planner,
         "seed": config.seed,
+        "planning_clock": config.planning_clock,
         "settings": config.settings,
         "status": status,
         "reason": reason,

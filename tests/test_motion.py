@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import time
+
 import numpy as np
 import pytest
 
@@ -185,3 +188,50 @@ def test_geometric_planner_checks_the_turn_drive_turn_a_differential_base_drives
         assert validate_path(problem, executed, resolution=problem.resolution, margin=0.0) is None
         run = robot.execute(plan, noise=False, world="true")
         assert not run.collided and np.allclose(run.final, goal, atol=1e-6)
+
+
+class _SlowProblem(MotionProblem):
+    """Every validity check takes ``delay`` seconds longer (a CPU shared with other work)."""
+
+    delay = 0.0
+
+    def is_valid(self, q: np.ndarray, margin: float | None = None) -> bool:
+        time.sleep(self.delay)
+        return super().is_valid(q, margin)
+
+
+def test_the_work_clock_makes_a_plan_independent_of_the_cpu_load(workcell, endpoints) -> None:
+    """A 0.3 s limit on the work clock (validity checks at nominal cost) gives the same path
+    when every check takes 2 ms longer; on the wall clock the slowdown cuts the search short."""
+    from explore.motion import plan
+    from explore.planning_clock import work_clock
+
+    results = {}
+    for clock in ("work", "wall"):
+        for delay in (0.0, 0.002):
+            problem = _SlowProblem(workcell.robot)
+            problem.delay = delay
+            with work_clock() if clock == "work" else contextlib.nullcontext():
+                found = plan(problem, *endpoints, "rrt_connect", time_limit=0.3, seed=1)
+            results[clock, delay] = (found, problem.checks)
+    (fast, fast_checks), (slow, slow_checks) = results["work", 0.0], results["work", 0.002]
+    assert fast is not None and slow is not None
+    assert np.array_equal(fast.path, slow.path) and fast_checks == slow_checks
+    assert slow.planning_time > 0.3  # the same work took longer than the limit in wall time
+    wall, wall_checks = results["wall", 0.002]
+    assert wall_checks < fast_checks  # the wall clock stopped the same search earlier
+    assert wall is None or not np.array_equal(wall.path, fast.path)
+
+
+def test_a_work_budget_without_work_still_ends_by_the_wall_guard() -> None:
+    """A planner that charges nothing cannot hang a run: the budget ends after
+    WALL_FACTOR x limit + 1 s of wall time."""
+    from explore.planning_clock import WALL_FACTOR, Budget, work_clock
+
+    with work_clock():
+        budget = Budget(0.02)
+        t0 = time.perf_counter()
+        while not budget.expired():
+            time.sleep(0.01)
+        waited = time.perf_counter() - t0
+    assert WALL_FACTOR * 0.02 + 1.0 <= waited + 0.011 < WALL_FACTOR * 0.02 + 1.5
