@@ -5,6 +5,8 @@ the Rerun recording."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -59,9 +61,15 @@ def test_model_object_models_the_bunny_and_is_deterministic(tmp_path, capsys) ->
     assert library["coverage_estimate"] == pytest.approx(
         first["coverage_estimate_per_scan"], abs=1e-6)
     assert library["sources"] == first["sources"] and library["travel_m"] == pytest.approx(first["path_length_m"])
-    # the same seed again, this time also logging to Rerun: identical metrics apart from timing
+    # the same seed again, beside a busy process and logging to Rerun: identical metrics apart from
+    # timing (the default --planning-clock work measures planning limits in work, not wall time)
     rrd = tmp_path / "run.rrd"
-    code, second, _ = _run([*base, "--out", str(tmp_path / "b"), "--rerun", str(rrd)], capsys)
+    hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        code, second, _ = _run([*base, "--out", str(tmp_path / "b"), "--rerun", str(rrd)], capsys)
+    finally:
+        hog.kill()
+        hog.wait()
     assert code == 0
     same = {k: v for k, v in first.items() if k not in TIMING}
     assert {k: v for k, v in second.items() if k not in TIMING and k in same} == same
@@ -132,6 +140,13 @@ def test_unreachable_initial_scan_fails_with_metrics(tmp_path, capsys) -> None:
     assert m["reason"] == "Plan initial scan: no reachable initial scan (13 initial scans tried: 13 unreachable)"
     assert m["planning_attempts"] == 13 and m["planning_success"] == 0.0
     assert m["objects"][0]["result"] == "not_seen" and m["files"]["mesh"] is None
+
+
+def test_an_unknown_planning_clock_is_bad_input(tmp_path, capsys) -> None:
+    code, _, err = _run(["model_object", "--world", "bunny_pedestal", "--planning-clock", "fast",
+                         "--out", str(tmp_path / "r")], capsys)
+    assert code == 2 and err == ["error: --planning-clock: 'fast' is not one of work, wall"]
+    assert not (tmp_path / "r").exists()
 
 
 @pytest.fixture(scope="module")
