@@ -233,6 +233,30 @@ def test_base_laser_sees_the_table_legs_and_localises_a_view(registry):
     assert dp < 0.02 and math.degrees(da) < 1.0, (dp, math.degrees(da))
 
 
+def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(registry):
+    """Noise can stop the base within its 1 cm planning clearance of the table, where every plan
+    from there is refused. With no valid configuration on the last motion, the mover backs the
+    base off along its heading (2-20 cm) until planning can start, without touching anything."""
+    from explore.scene_motion import Mover
+    from explore.simulation import Simulation
+
+    with Simulation("scene_small_mm", registry) as sim:
+        robot = sim.robot
+        mover = Mover(sim, registry, noise=False)
+        problem = mover._problem()
+        q = np.asarray(robot.q, dtype=float).copy()  # at (0, -1) facing the table (+y)
+        while problem.is_valid(q):  # creep toward the table until the clearance is violated
+            q[1] += 0.002
+        assert problem.is_valid(q, margin=0.0)  # inside the clearance, not in contact
+        robot.q = q
+        robot.set_config(q)
+        mover._recover(problem)
+        moved = np.asarray(robot.q) - q
+        assert problem.is_valid(robot.q)
+        assert -0.2 <= moved[1] <= -0.02 and abs(moved[0]) < 1e-6 and abs(moved[2]) < 1e-6  # straight back
+        assert mover.collisions == 0
+
+
 @pytest.mark.slow
 def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_path):
     """The mobile base's own noisy execution (Vasquez-Gomez sigmas) drifts; the incremental gtsam pose
