@@ -685,9 +685,15 @@ class PlanarChecker:
     cannot change (the joints are fixed; ``q_ref`` must be valid). Boxes below (or above) the
     robot by at least ``margin`` never come closer in a planar motion and are left out (the
     floor).
+
+    ``drive_margin`` with ``ends`` (base poses): a pose d metres (xy) from the nearer end must
+    keep min(``drive_margin``, margin + d) from the bounding boxes of the known environment: a
+    funnel that lets the base start and stop near the table but keeps it ``drive_margin`` away
+    while it drives, room for the heading drift of a noisy base (Vasquez-Gomez's sigma_omega).
     """
 
-    def __init__(self, problem: MotionProblem, q_ref: Array, spacing: float = 0.015) -> None:
+    def __init__(self, problem: MotionProblem, q_ref: Array, spacing: float = 0.015, drive_margin: float = 0.0,
+                 ends: Sequence[Array] = ()) -> None:
         robot = problem.robot
         self.problem, self.q_ref = problem, np.asarray(q_ref, dtype=float).copy()
         self.base = list(robot.base_dofs)
@@ -700,6 +706,8 @@ class PlanarChecker:
         self.radius = float(np.sqrt((self.local**2).sum(axis=1)).max(initial=0.0))
         self.z = np.ascontiguousarray(points[:, 2])
         self.margin = problem.margin
+        self.drive_margin = max(float(drive_margin), self.margin)
+        self.ends = np.array([np.asarray(e, dtype=float)[:2] for e in ends]).reshape(-1, 2)
         self.slack = math.sqrt(3.0) * float(spacing) + 0.02
         boxes = []
         sim = getattr(robot, "sim", None)
@@ -736,9 +744,15 @@ class PlanarChecker:
         qb = np.asarray(qb, dtype=float)
         if np.any(qb < self.lower - 1e-9) or np.any(qb > self.upper + 1e-9):
             return False
+        drive = self.margin
+        if self.drive_margin > self.margin:
+            to_end = float(np.sqrt(((self.ends - qb[:2]) ** 2).sum(axis=1)).min(initial=np.inf))
+            drive = min(self.drive_margin, self.margin + to_end)
         clearance, inside = planar_points_clearance(
             self.local, self.z, self.radius, float(qb[0]), float(qb[1]), float(qb[2]), self.lo, self.hi,
-            self.margin + self.slack, self._box[0], self._box[1], self._points)
+            max(drive, self.margin + self.slack), self._box[0], self._box[1], self._points)
+        if clearance < drive - 1e-12 and drive > self.margin:  # the funnel, measured to the bounding boxes
+            return False
         space_free = self.problem.space_free
         if space_free is not None and inside:
             points = self._points
@@ -757,9 +771,13 @@ class _BaseProblem:
     :class:`PlanarChecker`, motions as the robot drives them (``problem.motion_path``).
     """
 
-    def __init__(self, problem: MotionProblem, carried: Array, lower: Array, upper: Array) -> None:
+    def __init__(self, problem: MotionProblem, carried: Array, lower: Array, upper: Array,
+                 goal: Array | None = None) -> None:
         self.problem, self.robot = problem, problem.robot
-        self.checker = PlanarChecker(problem, carried)
+        base = list(problem.robot.base_dofs)
+        ends = [carried[base]] + ([] if goal is None else [np.asarray(goal, dtype=float)])
+        self.checker = PlanarChecker(problem, carried, drive_margin=float(getattr(self.robot, "drive_clearance", 0.0)),
+                                     ends=ends)
         self.checker.lower, self.checker.upper = lower, upper
         self.lower, self.upper = lower, upper
         self.resolution = problem.resolution
@@ -873,7 +891,7 @@ def _mobile_plan(
         first = _joint_motion(problem, start, carried, budget, seed)
         if first is None:
             continue
-        sub = _BaseProblem(problem, carried, lower, upper)
+        sub = _BaseProblem(problem, carried, lower, upper, goal[base])
         driven = drive(sub, carried[base], goal[base], budget)
         if driven is None:
             continue

@@ -48,6 +48,24 @@ class Move:
     planner: str
 
 
+def _split_drive(robot: Any, plan: Any, base_dofs: tuple[int, ...], length: float) -> tuple[Any, Any]:
+    """(first leg, rest) of a plan at ``length`` metres of base travel; rest None when the
+    plan drives less than 1.5 x ``length`` (no short last leg)."""
+    from .motion import MotionPlan
+
+    if plan.controls is None:
+        controls, path = robot.controls_from_path(plan.path)
+        plan = MotionPlan(path, controls=controls, dt=float(robot.dt), planner=plan.planner)
+    xy = np.asarray(plan.path, dtype=float)[:, list(base_dofs[:2])]
+    travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    if travel[-1] < 1.5 * length:
+        return plan, None
+    k = int(np.searchsorted(travel, length))
+    first = MotionPlan(plan.path[: k + 1], controls=plan.controls[:k], dt=plan.dt, planner=plan.planner)
+    rest = MotionPlan(plan.path[k:], controls=plan.controls[k:], dt=plan.dt, planner=plan.planner)
+    return first, rest
+
+
 def target_start(target: Target) -> Pose:
     return target.start if isinstance(target, ScanPath) else np.asarray(target, dtype=float)
 
@@ -79,9 +97,10 @@ class Mover:
     noise : execute with the robot's positioning noise
     occupied_from : PVS probability from which a robot point counts as colliding
     seed : seeds IK restarts and the execution noise
-    planning_time : time limit of one motion plan (s); generous, so that the path simplification
-        normally runs to completion: a deadline hit under CPU load changes the path, the noise
-        drawn along it and so the run (the same seed must give the same metrics)
+    planning_time : time limit of one motion plan (s on the planning clock,
+        :mod:`explore.planning_clock`); generous, so that the path simplification normally runs
+        to completion (on the wall clock a limit hit under CPU load changes the path, the noise
+        drawn along it and so the run)
     min_path_fraction : shortest reachable share of a scan path that is still scanned
     """
 
@@ -212,10 +231,7 @@ class Mover:
             self.failed_moves += 1
             return None
         start_pose = robot.fk(start)
-        execution = robot.execute(plan, self.rng, noise=self.noise, world="true")
-        collisions = len(execution.collisions)
-        self._odometry(start, execution)
-        self._back_off(execution)
+        collisions = self._drive(problem, plan)
         true_start = robot.fk(robot.q)
         believed = self.believed_pose()
         true_target: Target = true_start
@@ -233,6 +249,41 @@ class Mover:
         self.travel_m += travel
         self.collisions += collisions
         return Move(true_target, believed, travel, planning_s, collisions, getattr(plan, "planner", ""))
+
+    def _drive(self, problem: Any, plan: Any) -> int:
+        """Execute ``plan`` with noise; the number of collisions.
+
+        With the robot parameter ``replan_distance`` > 0 (a base that localises while it
+        drives, as a path-following controller would) the plan is executed in legs of that
+        much base travel; after each leg a short plan takes the robot back to where the leg
+        should have ended, and the next leg starts from there. Open loop, a drive of several
+        metres with sigma_omega = 0.28 rad/s ends decimetres off its path (Vasquez-Gomez
+        Sec. A6). A correction that cannot be planned is skipped (the leg goes on open loop).
+        """
+        robot = self.robot
+        leg_length = float(getattr(robot, "replan_distance", 0.0) or 0.0)
+        collisions = 0
+        while True:
+            leg, rest = (plan, None) if leg_length <= 0.0 or not self.base_dofs else \
+                _split_drive(robot, plan, self.base_dofs, leg_length)
+            part = leg
+            while part is not None:
+                start = np.asarray(robot.q, dtype=float).copy()
+                execution = robot.execute(part, self.rng, noise=self.noise, world="true")
+                collisions += len(execution.collisions)
+                self._odometry(start, execution)
+                self._back_off(execution)
+                if execution.collided or rest is None:
+                    return collisions
+                part = None if part is not leg else self._correction(problem, rest.path[0])
+            plan = rest
+
+    def _correction(self, problem: Any, nominal: Array) -> Any:
+        """A plan from the robot's configuration to ``nominal`` (None: none needed or found)."""
+        here = np.asarray(self.robot.q, dtype=float).copy()
+        if np.linalg.norm(here[list(self.base_dofs)] - np.asarray(nominal)[list(self.base_dofs)]) < 0.01:
+            return None
+        return self.planner.plan(problem, here, np.asarray(nominal, dtype=float), seed=int(self.rng.integers(2**31)))
 
     def _fly(self, target: Target) -> Move:
         start = target_start(target)

@@ -577,6 +577,10 @@ _BASE = (
     Param("sigma_w", float, SIGMA_W, "rad/s", "noise sigma of angular velocity (Vasquez-Gomez: 0.28 rad/s)", low=0.0),
     Param("laser_height", float, 0.0, "m", "planar 360-degree localisation laser on the base at this height (0: none)",
           low=0.0),
+    Param("drive_clearance", float, 0.0, "m", "margin kept while the base drives, away from the drive's ends "
+          "(0: the planning clearance only)", low=0.0),
+    Param("replan_distance", float, 0.0, "m", "scene exploration: re-plan a drive from the reached pose after this "
+          "many metres (a base that localises while it drives; 0: the whole plan open loop)", low=0.0),
     Param("laser_range", float, 4.0, "m", "base laser range", low=0.1),
     Param("laser_sigma", float, 0.01, "m", "base laser range noise sigma", low=0.0),
 )

@@ -235,3 +235,37 @@ def test_a_work_budget_without_work_still_ends_by_the_wall_guard() -> None:
             time.sleep(0.01)
         waited = time.perf_counter() - t0
     assert WALL_FACTOR * 0.02 + 1.0 <= waited + 0.011 < WALL_FACTOR * 0.02 + 1.5
+
+
+def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(registry) -> None:
+    """Start and goal 1.2 m apart beside the table, a few cm from it: the straight drive along
+    its edge is valid with the 1 cm clearance; with drive_clearance 0.2 m the base may start and
+    stop there, but every pose 0.2 m or more from both ends keeps 0.2 m from the table."""
+    from explore.bullet import p
+    from explore.motion import PlanarChecker, box_distance, plan_mobile
+
+    with Simulation("scene_small_mm", registry) as sim:
+        robot = sim.robot
+        table = next(b.body_id for b in sim.bodies if b.name == "table")
+        lo, hi = (np.array(v) for v in p.getAABB(table, physicsClientId=sim.client))
+        problem = MotionProblem(robot)
+        start = robot.q.copy()
+        start[:3] = (-0.6, -1.0, 0.0)  # heading along the table's south edge
+        while problem.is_valid(start):  # creep up to the table
+            start[1] += 0.005
+        start[1] -= 0.03
+        goal = start.copy()
+        goal[0] = 0.6
+        line = np.linspace(start[:3], goal[:3], 25)
+        near = PlanarChecker(problem, start)
+        assert all(near(qb) for qb in line)
+        funnel = PlanarChecker(problem, start, drive_margin=0.2, ends=[start[:3], goal[:3]])
+        assert funnel(line[0]) and funnel(line[-1]) and not funnel(line[12])
+        robot.drive_clearance = 0.2
+        found = plan_mobile(problem, start, goal, time_limit=20.0, seed=1)
+        assert found is not None
+        away = [q for q in found.path
+                if min(np.linalg.norm(q[:2] - start[:2]), np.linalg.norm(q[:2] - goal[:2])) >= 0.2]
+        assert away  # the drive leaves the funnels at the ends
+        gaps = [box_distance(robot.link_points(q), lo[None], hi[None]).min() for q in away]
+        assert min(gaps) >= 0.2 - 0.03  # surface samples every 3 cm
