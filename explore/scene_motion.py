@@ -237,10 +237,7 @@ class Mover:
         true_target: Target = true_start
         if isinstance(target, ScanPath) and len(sweep) > 1:
             path = np.vstack([robot.q, sweep[1:] - sweep[0] + robot.q])
-            sweep_exec = robot.execute(path, self.rng, noise=self.noise, world="true")
-            collisions += len(sweep_exec.collisions)
-            self._odometry(path[0], sweep_exec)
-            self._back_off(sweep_exec)
+            collisions += len(self._execute(path).collisions)
             true_end = robot.fk(robot.q)
             end = true_start.copy()
             end[:3, 3] = true_end[:3, 3]
@@ -260,23 +257,30 @@ class Mover:
         metres with sigma_omega = 0.28 rad/s ends decimetres off its path (Vasquez-Gomez
         Sec. A6). A correction that cannot be planned is skipped (the leg goes on open loop).
         """
-        robot = self.robot
-        leg_length = float(getattr(robot, "replan_distance", 0.0) or 0.0)
+        leg_length = float(getattr(self.robot, "replan_distance", 0.0) or 0.0)
         collisions = 0
         while True:
             leg, rest = (plan, None) if leg_length <= 0.0 or not self.base_dofs else \
-                _split_drive(robot, plan, self.base_dofs, leg_length)
-            part = leg
-            while part is not None:
-                start = np.asarray(robot.q, dtype=float).copy()
-                execution = robot.execute(part, self.rng, noise=self.noise, world="true")
+                _split_drive(self.robot, plan, self.base_dofs, leg_length)
+            execution = self._execute(leg)
+            collisions += len(execution.collisions)
+            if execution.collided or rest is None:
+                return collisions
+            correction = self._correction(problem, rest.path[0])
+            if correction is not None:
+                execution = self._execute(correction)
                 collisions += len(execution.collisions)
-                self._odometry(start, execution)
-                self._back_off(execution)
-                if execution.collided or rest is None:
+                if execution.collided:
                     return collisions
-                part = None if part is not leg else self._correction(problem, rest.path[0])
             plan = rest
+
+    def _execute(self, plan: Any) -> Any:
+        """Execute a plan or path with noise against the true world; odometry and bumper stop."""
+        start = np.asarray(self.robot.q, dtype=float).copy()
+        execution = self.robot.execute(plan, self.rng, noise=self.noise, world="true")
+        self._odometry(start, execution)
+        self._back_off(execution)
+        return execution
 
     def _correction(self, problem: Any, nominal: Array) -> Any:
         """A plan from the robot's configuration to ``nominal`` (None: none needed or found)."""
@@ -308,11 +312,8 @@ class Mover:
             goal = self._escape(problem)
             if goal is None:
                 return
-            start = np.asarray(self.robot.q, dtype=float).copy()
-            execution = self.robot.execute(np.vstack([start, goal]), self.rng, noise=self.noise, world="true")
+            execution = self._execute(np.vstack([self.robot.q, goal]))
             self.collisions += len(execution.collisions)
-            self._odometry(start, execution)
-            self._back_off(execution)
 
     def _escape(self, problem: Any) -> Array | None:
         """The latest valid configuration of the last motion, else (a base) the nearest base
