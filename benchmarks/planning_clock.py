@@ -6,7 +6,7 @@ times (non-negative least squares). Prints, per world and planner, the median ra
 wall time to nominal work time with the current costs and with the fitted ones. A ratio
 near 1 means a time limit on the work clock lasts about as long as on the wall clock.
 
-    .venv/bin/python benchmarks/planning_clock.py            # table (~5 min)
+    .venv/bin/python benchmarks/planning_clock.py            # table (a few minutes)
     .venv/bin/python benchmarks/planning_clock.py --json     # rows as JSON only
 """
 

@@ -7,7 +7,7 @@ validity check and every planner iteration advances the clock by a fixed nominal
 (:data:`COSTS`, seconds measured on the 2-core CI machine by ``benchmarks/planning_clock.py``),
 so the same seed gives the same plans beside any other load. Reported planning times stay
 wall times. A planner that spends a limit's worth of wall time ten times over without
-reaching its work budget is still stopped (:func:`expired`), so nothing hangs; that
+reaching its work budget is still stopped (:meth:`Budget.expired`), so nothing hangs; that
 fallback is the only place where wall time decides.
 """
 
@@ -19,7 +19,7 @@ from contextlib import contextmanager
 from typing import Any
 
 # Nominal seconds per unit of work, fitted to wall time by benchmarks/planning_clock.py (2 cores, no load:
-# 4.7e-4, 1.3e-4 and ~0 s); a work limit then lasts 0.6-1.2 times as long in wall time.
+# 4.7-5.4e-4, 1.3e-4 and ~0 s); a work limit then lasts 0.7-1.9 times as long in wall time (docs/results.md).
 COSTS: dict[str, float] = {
     "state": 4.0e-4,  # MotionProblem.is_valid: pybullet pair tests and the PVS points of one configuration
     "planar": 1.0e-4,  # PlanarChecker: one rigid base pose against boxes (numba) and the PVS
@@ -42,11 +42,6 @@ def charge(kind: str, count: int = 1) -> None:
     if _work is not None:
         _work += COSTS[kind] * count
         counts[kind] += count
-
-
-def deterministic() -> bool:
-    """True inside :func:`work_clock`."""
-    return _work is not None
 
 
 @contextmanager

@@ -579,8 +579,9 @@ _BASE = (
           low=0.0),
     Param("drive_clearance", float, 0.0, "m", "margin kept while the base drives, away from the drive's ends "
           "(0: the planning clearance only)", low=0.0),
-    Param("replan_distance", float, 0.0, "m", "scene exploration: re-plan a drive from the reached pose after this "
-          "many metres (a base that localises while it drives; 0: the whole plan open loop)", low=0.0),
+    Param("replan_distance", float, 0.0, "m", "scene exploration: drive in legs of this many metres, each followed "
+          "by a short plan back onto the planned path (a base that localises while it drives; 0: open loop)",
+          low=0.0),
     Param("laser_range", float, 4.0, "m", "base laser range", low=0.1),
     Param("laser_sigma", float, 0.01, "m", "base laser range noise sigma", low=0.0),
 )
