@@ -771,11 +771,9 @@ class _BaseProblem:
     :class:`PlanarChecker`, motions as the robot drives them (``problem.motion_path``).
     """
 
-    def __init__(self, problem: MotionProblem, carried: Array, lower: Array, upper: Array,
-                 goal: Array | None = None) -> None:
+    def __init__(self, problem: MotionProblem, carried: Array, goal: Array, lower: Array, upper: Array) -> None:
         self.problem, self.robot = problem, problem.robot
-        base = list(problem.robot.base_dofs)
-        ends = [carried[base]] + ([] if goal is None else [np.asarray(goal, dtype=float)])
+        ends = [carried[list(problem.robot.base_dofs)], goal]  # the drive's start and goal base poses
         self.checker = PlanarChecker(problem, carried, drive_margin=float(getattr(self.robot, "drive_clearance", 0.0)),
                                      ends=ends)
         self.checker.lower, self.checker.upper = lower, upper
@@ -891,7 +889,7 @@ def _mobile_plan(
         first = _joint_motion(problem, start, carried, budget, seed)
         if first is None:
             continue
-        sub = _BaseProblem(problem, carried, lower, upper, goal[base])
+        sub = _BaseProblem(problem, carried, goal[base], lower, upper)
         driven = drive(sub, carried[base], goal[base], budget)
         if driven is None:
             continue
