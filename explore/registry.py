@@ -35,7 +35,7 @@ KINDS: tuple[str, ...] = (
     "behaviour",
     "executor",
 )
-BUILTIN_DISTRIBUTION = "explore"
+BUILTIN_DISTRIBUTION = "explore-nbv"  # the distribution name (PyPI's "explore" is an unrelated package)
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,8 @@ class Registry:
                 registry.load_errors[f"{dist}:{ep.name}"] = f"{type(error).__name__}: {error}"
                 continue
             name = f"{dist}:{ep.name}"
+            if pm.is_registered(plugin):  # the same module through a second (stale) distribution
+                continue
             pm.register(plugin, name=name)
             origins[name] = dist
         if not any(d == BUILTIN_DISTRIBUTION for d in origins.values()):

@@ -2,13 +2,42 @@
 
 from __future__ import annotations
 
+import faulthandler
 import os
+import sys
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+SLOW_TIMEOUT = 900.0  # seconds for a test marked slow without its own timeout mark
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.get_closest_marker("slow") and not item.get_closest_marker("timeout"):
+            item.add_marker(pytest.mark.timeout(SLOW_TIMEOUT))
+
+
+def _timeout_of(item: pytest.Item) -> float:
+    marker = item.get_closest_marker("timeout")
+    if marker is not None and marker.args:
+        return float(marker.args[0])
+    return float(item.config.getini("timeout") or 0)
+
+
+@pytest.fixture(autouse=True)
+def _hang_guard(request: pytest.FixtureRequest) -> Iterator[None]:
+    """A last resort behind pytest-timeout: a C-level watchdog (no GIL needed) that dumps every
+    thread's stack and ends the session when a test hangs inside native code holding the GIL,
+    where pytest-timeout's Python handler can never run."""
+    limit = _timeout_of(request.node)
+    if limit > 0:
+        faulthandler.dump_traceback_later(1.5 * limit + 30.0, exit=True, file=sys.stderr)
+    yield
+    faulthandler.cancel_dump_traceback_later()
 
 
 @pytest.fixture(scope="session")

@@ -13,10 +13,10 @@ from explore.registry import Registry
 def test_builtins_are_found_through_the_entry_point(registry) -> None:
     from importlib import metadata
 
-    eps = [ep for ep in metadata.entry_points(group="explore.plugins") if ep.dist.name == "explore"]
+    eps = [ep for ep in metadata.entry_points(group="explore.plugins") if ep.dist.name == "explore-nbv"]
     assert [ep.value for ep in eps] == ["explore_plugins"]
     info = registry.get("sensor", "depth_camera")
-    assert info.origin == "explore"
+    assert info.origin == "explore-nbv"
     assert info.doc.startswith("Pinhole depth camera")
     assert {"laser_striper", "depth_camera"} <= set(registry.names("sensor"))
 
