@@ -622,9 +622,13 @@ def _ompl_search(
         instance.setRange(step)
     ss.setPlanner(instance)
     ss.setStartAndGoalStates(_state(space, start), _state(space, goal), goal_threshold)
-    status = ss.solve(search.ompl_condition())
-    if not status or not ss.haveExactSolutionPath():
-        return None
+    if isinstance(instance, og.PRM):
+        if not _solve_roadmap(ss, instance, search):
+            return None
+    else:
+        status = ss.solve(search.ompl_condition())
+        if not status or not ss.haveExactSolutionPath():
+            return None
     solution = ss.getSolutionPath()
     if simplify and solution.getStateCount() > 2:
         simplifier = og.PathSimplifier(si)
@@ -640,6 +644,39 @@ def _ompl_search(
     return path
 
 
+
+
+ROADMAP_ROUND = 0.02  # planning-clock seconds of roadmap growth between two solution checks (expansion: half)
+
+
+def _solve_roadmap(ss: Any, prm: Any, search: Budget) -> bool:
+    """PRM / PRM* without OMPL's second thread: True when the roadmap joins start and goal.
+
+    OMPL's ``PRM::solve`` grows the roadmap while a second thread looks for a solution. That
+    thread evaluates the termination condition, a Python callable here, while the main
+    thread waits for it in ``join`` holding the GIL: a deadlock about one run in three. Which
+    roadmap the answer comes from also depends on the two threads' timing (and OMPL's
+    grow/expand rounds on wall time). Here everything runs in this thread: the roadmap grows
+    in rounds on the planning clock (2:1 growth to expansion, as OMPL's ``constructRoadmap``),
+    and after each round ``solve`` runs with an always-terminating C++ condition, so its
+    thread returns at once and no Python is called off this thread. That ``solve`` adds start
+    and goal as milestones and returns the roadmap's shortest path to the vertex nearest the
+    goal (as an approximate solution); it reaches the goal when that vertex is the goal.
+    """
+    ob, _, _ = _ompl()
+    pdef = ss.getProblemDefinition()
+    done = ob.plannerAlwaysTerminatingCondition()
+    grow = True
+    while True:
+        pdef.clearSolutionPaths()
+        ss.solve(done)
+        if pdef.hasSolution() and pdef.getSolutionDifference() <= 1e-12:
+            return True
+        if search.expired():
+            return False
+        round_ = search.slice(ROADMAP_ROUND if grow else 0.5 * ROADMAP_ROUND)
+        (prm.growRoadmapPtc if grow else prm.expandRoadmapPtc)(round_.ompl_condition())
+        grow = not grow
 
 
 def straight_line(

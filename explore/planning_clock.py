@@ -76,6 +76,12 @@ class Budget:
         out.wall_deadline = min(out.wall_deadline, self.wall_deadline)
         return out
 
+    def slice(self, seconds: float) -> Budget:
+        """A budget of ``seconds`` (at most what remains, ending no later than this one)."""
+        out = Budget(min(float(seconds), max(0.0, self.remaining())))
+        out.wall_deadline = min(out.wall_deadline, self.wall_deadline)
+        return out
+
     def ompl_condition(self) -> Any:
         """An OMPL ``PlannerTerminationCondition`` that charges one iteration per evaluation."""
         from ompl import base as ob

@@ -269,3 +269,41 @@ def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(registry) -> None:
         assert away  # the drive leaves the funnels at the ends
         gaps = [box_distance(robot.link_points(q), lo[None], hi[None]).min() for q in away]
         assert min(gaps) >= 0.2 - 0.03  # surface samples every 3 cm
+
+
+_ROADMAP_SOLVES = """
+import sys
+import numpy as np
+from explore.geometry import look_at
+from explore.motion import MotionProblem, plan
+from explore.planning_clock import work_clock
+from explore.registry import Registry
+from explore.simulation import Simulation
+
+with Simulation("workcell", Registry.load()) as sim:
+    rng = np.random.default_rng(0)
+    a = sim.robot.ik(look_at([0.45, -0.25, 0.85], [0.7, -0.2, 0.45]), rng)
+    b = sim.robot.ik(look_at([0.45, 0.3, 0.85], [0.75, 0.2, 0.45]), rng)
+    problem = MotionProblem(sim.robot)
+    paths = []
+    for i in range(int(sys.argv[2])):
+        with work_clock():
+            found = plan(problem, a, b, sys.argv[1], time_limit=1.0, simplify=False, seed=1)
+        paths.append(None if found is None else found.path.round(9).tobytes())
+    print(sum(p is not None for p in paths), len(set(paths)))
+"""
+
+
+@pytest.mark.parametrize(("planner", "solves"), [("prm", 50), ("PRMstar", 10)])
+def test_roadmap_planners_never_deadlock_and_repeat_their_path(planner, solves) -> None:
+    """OMPL's PRM::solve looks for a solution in a second thread that would call Python while the
+    main thread holds the GIL in join (a hang about one solve in three): consecutive solves all
+    finish, all find a path, and the same seed gives the same path every time."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _ROADMAP_SOLVES, planner, str(solves)], capture_output=True,
+                         text=True, timeout=150)
+    assert out.returncode == 0, out.stderr[-2000:]
+    found, distinct = map(int, out.stdout.split())
+    assert found == solves and distinct == 1
