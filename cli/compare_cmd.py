@@ -117,6 +117,10 @@ def register(app: typer.Typer) -> None:
         ray_address: Annotated[
             str | None, typer.Option("--ray-address", help="Ray cluster address (default: a local Ray instance).")
         ] = None,
+        ray_token_file: Annotated[
+            Path | None, typer.Option("--ray-token-file", help="File with the Ray cluster's auth token (token "
+                                      "authentication; else RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH, ~/.ray/auth_token).")
+        ] = None,
         max_scans: Annotated[int | None, typer.Option("--max-scans", help="Scan budget of every run.")] = None,
         timeout: Annotated[float, typer.Option("--timeout", help="Seconds before a run is ended (timeout).")] = 1800.0,
         threads: Annotated[int, typer.Option("--threads", help="Numeric threads per run.")] = 1,
@@ -153,9 +157,14 @@ def register(app: typer.Typer) -> None:
         params: dict[str, Any] = {"jobs": jobs}
         if executor == "ray":
             params["address"] = ray_address or ""
-        elif ray_address:
-            raise BadInput("--ray-address", ray_address, "only applies to --executor ray")
+            params["token_file"] = str(ray_token_file or "")
+        elif ray_address or ray_token_file:
+            option = "--ray-address" if ray_address else "--ray-token-file"
+            raise BadInput(option, ray_address or str(ray_token_file), "only applies to --executor ray")
         runner = registry.create("executor", executor, params, "--executor", "executor")
+        check = getattr(runner, "check", None)
+        if check is not None:  # e.g. connect to the cluster before the first run starts
+            check()
         previous = signal.signal(signal.SIGTERM, _raise_interrupt)
         try:
             rows = compare(grid, out, runner, console=console)

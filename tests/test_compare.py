@@ -380,25 +380,38 @@ def _free_port() -> int:
 
 @pytest.mark.slow
 def test_ray_executor_gives_the_same_results_as_local(compared, tree_file, tmp_path) -> None:
+    """Against a head started with token authentication (a real cluster's set-up): the driver
+    connects with the cluster's token file and gives the local executor's results."""
+    import secrets
+
     port = _free_port()
     ray_bin = Path(sys.executable).parent / "ray"
     ray_tmp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # Ray's socket paths must stay short
+    token = tmp_path / "ray_token"
+    token.write_text(secrets.token_hex(32))
+    head_env = {**os.environ, "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN_PATH": str(token)}
+    driver_env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_AUTH")}
     head = subprocess.Popen(
         [str(ray_bin), "start", "--head", "--block", f"--port={port}", "--node-ip-address=127.0.0.1",
          "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={ray_tmp}"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True, env=head_env,
     )
     try:
         out = tmp_path / "ray_results"
-        args = [str(EXPLORE), *grid_args(tree_file, out, "--executor", "ray", "--ray-address", f"127.0.0.1:{port}")]
+        args = [str(EXPLORE), *grid_args(tree_file, out, "--executor", "ray", "--ray-address", f"127.0.0.1:{port}",
+                                         "--ray-token-file", str(token))]
         deadline = time.monotonic() + 60
         while True:  # the head needs a few seconds before it accepts drivers
             assert head.poll() is None, f"ray start failed: {head.stdout.read()[-2000:]}"
-            done = subprocess.run(args, capture_output=True, text=True, timeout=240)
+            done = subprocess.run(args, capture_output=True, text=True, timeout=240, env=driver_env)
             if done.returncode == 0 or time.monotonic() > deadline:
                 break
             time.sleep(2)
         assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        no_token = subprocess.run(args[:-2], capture_output=True, text=True, timeout=120, env=driver_env,
+                                  cwd=tmp_path)
+        lines = no_token.stderr.strip().splitlines()
+        assert no_token.returncode == 2 and len(lines) == 1 and "token authentication" in lines[0], no_token.stderr
     finally:
         os.killpg(head.pid, signal.SIGKILL)  # the head and every Ray process it started (its group)
         head.wait()
@@ -408,6 +421,17 @@ def test_ray_executor_gives_the_same_results_as_local(compared, tree_file, tmp_p
     assert len(remote) == 8
     strip = [{k: v for k, v in r.items() if k not in TIMING} for r in local]
     assert [{k: v for k, v in r.items() if k not in TIMING} for r in remote] == strip
+
+
+def test_an_unreachable_ray_address_is_one_line_and_exit_2(tree_file, tmp_path) -> None:
+    out = tmp_path / "unreached"
+    args = [str(EXPLORE), *grid_args(tree_file, out, "--executor", "ray", "--ray-address", f"127.0.0.1:{_free_port()}")]
+    t0 = time.monotonic()
+    done = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and time.monotonic() - t0 < 30
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--ray-address" in lines[0] and "no Ray head answers there" in lines[0], done.stderr
+    assert not out.exists()
 
 
 @pytest.mark.slow
