@@ -6,13 +6,16 @@ Every name is checked before the first run starts (one line, exit code 2 when wr
 
 from __future__ import annotations
 
-import signal
+import itertools
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from explore.errors import BadInput
+from explore.errors import BadInput, Terminated
+from explore.outcomes import FINISHED
+from explore.output_paths import check_output
 
 
 def _names(text: str | None, option: str, allow_empty: bool = True) -> list[str | None]:
@@ -50,7 +53,7 @@ def build_grid(
 ) -> tuple[Any, Any]:
     """Validate every argument against the registry and the search paths; return (grid, registry)."""
     from explore.compare import Grid, make_registry
-    from explore.run import RunConfig
+    from explore.run import RunConfig, check_inputs
     from explore.trees import find_tree, load_tree
     from explore.world import find_world, load_world_spec
 
@@ -61,8 +64,8 @@ def build_grid(
     world_names = _names(worlds, "--worlds")
     if seeds < 1:
         raise BadInput("--seeds", str(seeds), "needs at least 1 seed")
-    if timeout <= 0:
-        raise BadInput("--timeout", str(timeout), "must be positive")
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise BadInput("--timeout", str(timeout), "must be a positive finite number of seconds")
     if max_scans is not None and max_scans < 1:
         raise BadInput("--max-scans", str(max_scans), "must be at least 1")
     if threads < 1:
@@ -85,16 +88,17 @@ def build_grid(
     _check_plugins(registry, "strategy", strategy_names, "--strategies")
     _check_plugins(registry, "motion_planner", planner_names, "--planners")
     _check_plugins(registry, "robot", robot_names, "--robots")
+    parsed_settings = RunConfig.parse_settings(settings)
+    for world in resolved_worlds:  # every --set key and value, as each run will check them
+        for strategy, planner, robot in itertools.product(strategy_names, planner_names, robot_names):
+            check_inputs(RunConfig(tree=str(tree_path), world=world, strategy=strategy, planner=planner, robot=robot,
+                                   max_scans=max_scans, settings=parsed_settings), registry)
     grid = Grid(
         tree=str(tree_path.resolve()), worlds=resolved_worlds, strategies=strategy_names, planners=planner_names,
         robots=robot_names, seeds=list(range(seeds)), max_scans=max_scans,
-        settings=RunConfig.parse_settings(settings), timeout=timeout, plugins=plugin_specs, threads=threads,
+        settings=parsed_settings, timeout=timeout, plugins=plugin_specs, threads=threads,
     )
     return grid, registry
-
-
-def _raise_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
 
 
 def register(app: typer.Typer) -> None:
@@ -150,8 +154,7 @@ def register(app: typer.Typer) -> None:
         )
         if out is None:
             raise BadInput("--out", None, "missing (the results folder)")
-        if out.exists() and not out.is_dir():
-            raise BadInput(str(out), None, "exists and is not a folder")
+        check_output(out, "--out", folder=True)
         if jobs < 0:
             raise BadInput("--jobs", str(jobs), "must be 0 (one per core) or more")
         params: dict[str, Any] = {"jobs": jobs}
@@ -165,18 +168,15 @@ def register(app: typer.Typer) -> None:
         check = getattr(runner, "check", None)
         if check is not None:  # e.g. connect to the cluster before the first run starts
             check()
-        previous = signal.signal(signal.SIGTERM, _raise_interrupt)
         try:
             rows = compare(grid, out, runner, console=console)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as stop:  # SIGINT, or SIGTERM (Terminated)
             console.print(
-                f"interrupted: finished runs are in {out / RESULTS_FILE}; run the same command to resume",
-                soft_wrap=True, highlight=False,
+                f"{'terminated' if isinstance(stop, Terminated) else 'interrupted'}: finished runs are in "
+                f"{out / RESULTS_FILE}; run the same command to resume", soft_wrap=True, highlight=False,
             )
-            return 130
-        finally:
-            signal.signal(signal.SIGTERM, previous)
-        bad = [r for r in rows if r["status"] not in ("success", "failure")]
+            return 143 if isinstance(stop, Terminated) else 130
+        bad = [r for r in rows if r["status"] not in FINISHED]
         console.print(
             f"{len(rows)} runs ({len(bad)} crashed or timed out); results: {out / RESULTS_FILE}; "
             f"report: {out / 'report.html'}",

@@ -113,10 +113,13 @@ def register(app: typer.Typer) -> None:
         db: DbOption = None,
     ) -> None:
         """Write an object's mesh to a file."""
-        from .main import console, out_path
+        from explore.output_paths import check_output
 
+        from .main import console
+
+        check_output(out, "OUT", suffixes=(".ply", ".obj", ".stl"))
         with _open(db, readonly=True) as database:
-            path = database.export(name, out_path(out))
+            path = database.export(name, out)
             console.print(f"wrote {path}")
 
     app.add_typer(sub, name="db")

@@ -6,16 +6,16 @@ Exit codes: 0 success, 1 the mission failed (reported, not crashed), 2 bad input
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Annotated
 
-import click
 import typer
 from rich.console import Console
 
 from explore import __version__
-from explore.errors import BadInput, MissionFailed
+from explore.errors import BadInput, MissionFailed, Terminated
 
 app = typer.Typer(
     name="explore",
@@ -24,8 +24,9 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-console = Console()
-err_console = Console(stderr=True, soft_wrap=True)
+# markup off by default: user text (names, paths, messages) is printed as it is; "[b]" or ":x:" stay text
+console = Console(markup=False, emoji=False, highlight=False)
+err_console = Console(stderr=True, soft_wrap=True, markup=False, emoji=False, highlight=False)
 
 
 def _version(value: bool) -> None:
@@ -65,32 +66,54 @@ _register_subcommands()
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI and return its exit code (bad input: one line on stderr, code 2)."""
+    """Run the CLI and return its exit code.
+
+    0 success, 1 the mission failed, 2 bad input or a usage error (one line on stderr, never a
+    traceback), 130 interrupted (SIGINT), 143 terminated (SIGTERM). A bare group (``explore``,
+    ``explore db``) prints its help and exits 0.
+    """
     os.environ.setdefault("PYTHONWARNINGS", "ignore")
     try:
         result = app(args=argv, prog_name="explore", standalone_mode=False)
     except BadInput as error:
-        err_console.print(f"error: {error.line()}", markup=False, highlight=False)
-        return 2
+        return _error_line(f"error: {error.line()}", 2)
     except MissionFailed as error:
-        err_console.print(f"mission failed: {error}", markup=False, highlight=False)
-        return 1
-    except click.exceptions.Exit as error:
+        return _error_line(f"mission failed: {error}", 1)
+    except typer.Exit as error:
         return int(error.exit_code)
-    except click.exceptions.Abort:
-        err_console.print("aborted")
-        return 130
-    except click.ClickException as error:
-        error.show()
-        return 2
+    except typer.Abort:
+        return _error_line("aborted", 130)
+    except typer.TyperException as error:  # usage errors, raised by typer's own bundled click
+        if type(error).__name__ == "NoArgsIsHelpError":  # typer printed the help already
+            return 0
+        return _error_line(_usage_line(error), 2)
+    except Terminated:
+        return _error_line("terminated", 143)
     except KeyboardInterrupt:
-        err_console.print("interrupted")
-        return 130
+        return _error_line("interrupted", 130)
     return int(result) if isinstance(result, int) else 0
+
+
+def _error_line(line: str, code: int) -> int:
+    err_console.print(line, markup=False, highlight=False)
+    return code
+
+
+def _usage_line(error: Exception) -> str:
+    """A usage error as one line: the command, what is wrong and where help is."""
+    ctx = getattr(error, "ctx", None)
+    command = ctx.command_path if ctx is not None else "explore"
+    message = " ".join(error.format_message().split())  # type: ignore[attr-defined]
+    return f"error: {command}: {message} (see: {command} --help)"
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated
 
 
 def run() -> None:
     """Console-script entry point."""
+    signal.signal(signal.SIGTERM, _raise_terminated)
     code = main()
     sys.stdout.flush()
     sys.stderr.flush()
@@ -107,8 +130,6 @@ def registry():
 
 
 def out_path(path: Path) -> Path:
-    """A writable output path (its folder is created); refuse to write into a folder path."""
-    if path.exists() and path.is_dir():
-        raise BadInput(str(path), None, "is a folder, expected a file path")
+    """An output file path checked by :func:`explore.output_paths.check_output`, its folder created now."""
     path.parent.mkdir(parents=True, exist_ok=True)
     return path

@@ -35,6 +35,6 @@ def register(app: typer.Typer) -> None:
                     table.add_row("", "", "", f"  {p.describe()}")
         console.print(table)
         for name, error in reg.load_errors.items():
-            console.print(f"[yellow]could not load plugin {name}: {error}[/yellow]")
+            console.print(f"could not load plugin {name}: {error}", style="yellow")
 
     app.add_typer(sub, name="plugins")

@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Group
+from rich.markup import escape
 from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
@@ -58,7 +59,7 @@ def register(app: typer.Typer) -> None:
         planner: Annotated[str | None, typer.Option("--planner", help="Motion planner plugin.")] = None,
         robot: Annotated[str | None, typer.Option("--robot", help="Robot plugin (default: the world's).")] = None,
         sensor: Annotated[str | None, typer.Option("--sensor", help="Sensor plugin (default: the world's).")] = None,
-        seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same metrics).")] = 0,
+        seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (same seed, same metrics).")] = 0,
         max_scans: Annotated[int | None, typer.Option("--max-scans", min=1, help="Stop after this many scans.")] = None,
         set_: Annotated[list[str] | None, typer.Option("--set", help="key=value override (repeatable).")] = None,
         out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/...).")] = None,
@@ -71,7 +72,9 @@ def register(app: typer.Typer) -> None:
         """Run an exploration tree on a world; exit 0 on success, 1 if the mission failed."""
         from rich.live import Live
 
-        from explore.run import RunConfig, execute
+        from explore.errors import Terminated
+        from explore.outcomes import STYLE, SUCCESS
+        from explore.run import RunConfig, default_out_dir, execute
 
         from .main import console, registry
 
@@ -92,33 +95,58 @@ def register(app: typer.Typer) -> None:
                 last["line"] = line
                 console.print(f"[{context.elapsed():6.1f} s] {line}", markup=False, highlight=False)
 
-        if interactive:
-            with Live(console=console, auto_refresh=False, transient=False) as live:
+        if config.out is None:
+            config.out = default_out_dir(config)
+        try:
+            if interactive:
+                with Live(console=console, auto_refresh=False, transient=False) as live:
 
-                def on_tick(root: Any, context: Any) -> None:
-                    now = time.perf_counter()
-                    if now - last["t"] > 0.1 or root.status.value != "RUNNING":
-                        last["t"] = now
-                        live.update(live_view(root, context), refresh=True)
+                    def on_tick(root: Any, context: Any) -> None:
+                        now = time.perf_counter()
+                        if now - last["t"] > 0.1 or root.status.value != "RUNNING":
+                            last["t"] = now
+                            live.update(live_view(root, context), refresh=True)
 
-                result = execute(config, reg, on_tick)
-        else:
-            result = execute(config, reg, plain_progress)
-        style = "green" if result.status == "success" else "red"
-        console.print(f"[{style}]{result.status}[/{style}]: {result.reason}")
-        summary = {k: result.metrics.get(k) for k in ("scans", "coverage", "coverage_estimate", "path_length_m")}
-        console.print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
-        console.print(f"results: {result.out_dir}")
+                    result = execute(config, reg, on_tick)
+            else:
+                result = execute(config, reg, plain_progress)
+        except KeyboardInterrupt as stop:  # SIGINT, or SIGTERM (Terminated): the results so far are written
+            what, code = ("terminated", 143) if isinstance(stop, Terminated) else ("interrupted", 130)
+            if (config.out / "metrics.json").exists():
+                console.print(f"[magenta]{what}[/magenta]: results so far in {escape(str(config.out))}", markup=True)
+            raise typer.Exit(code) from None
+        style = STYLE.get(result.status, "red")
+        console.print(f"[{style}]{result.status}[/{style}]: {escape(result.reason)}", markup=True)
+        console.print(summary_line(result.metrics), markup=False, highlight=False)
+        console.print(f"results: {result.out_dir}", highlight=False, soft_wrap=True)
         if rerun is not None:
-            console.print(f"rerun recording: {rerun} (view with: rerun {rerun})")
-        return 0 if result.status == "success" else 1
+            console.print(f"rerun recording: {rerun} (view with: rerun {rerun})", highlight=False, soft_wrap=True)
+        return 0 if result.status == SUCCESS else 1
+
+
+def summary_line(metrics: dict[str, Any]) -> str:
+    """One line of the numbers a run is judged by: the modelling's, or the scene's objects."""
+    if "objects_total" in metrics:  # a scene run
+        counts: dict[str, int] = {}
+        for row in metrics.get("objects") or []:
+            counts[row.get("result", "?")] = counts.get(row.get("result", "?"), 0) + 1
+        parts = [f"objects {metrics.get('objects_explained', 0)}/{metrics['objects_total']} explained",
+                 ", ".join(f"{n} {k}" for k, n in sorted(counts.items())), f"views={metrics.get('views')}"]
+        if metrics.get("collisions"):
+            parts.append(f"collisions={metrics['collisions']}")
+        return "  ".join(p for p in parts if p)
+    keys = ("scans", "coverage", "coverage_estimate", "path_length_m")
+    values = {k: metrics.get(k) for k in keys if metrics.get(k) is not None}
+    if metrics.get("collisions"):
+        values["collisions"] = metrics["collisions"]
+    return " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in values.items())
 
 
 def register_demo(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
         max_scans: Annotated[int, typer.Option("--max-scans", min=1, help="Scan budget.")] = 10,
-        seed: Annotated[int, typer.Option("--seed")] = 0,
+        seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed.")] = 0,
     ) -> int:
         """The main job: model the bunny on its pedestal with Kriegel's NBS loop (< 3 min)."""
         from datetime import datetime

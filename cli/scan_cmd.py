@@ -10,6 +10,7 @@ import numpy as np
 import typer
 
 from explore.errors import BadInput
+from explore.output_paths import check_output
 
 
 def _vector(text: str, option: str) -> np.ndarray:
@@ -36,7 +37,7 @@ def register(app: typer.Typer) -> None:
         ] = None,
         sweep: Annotated[float, typer.Option("--sweep", min=0.0, help="Scan path length for line sensors [m].")] = 0.3,
         png: Annotated[Path | None, typer.Option("--png", help="Also save a picture of the scan.")] = None,
-        seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
+        seed: Annotated[int, typer.Option("--seed", min=0, help="Noise seed.")] = 0,
     ) -> None:
         """Simulate one scan of a world and write the measured points."""
         from explore.acquire import target_for
@@ -49,8 +50,9 @@ def register(app: typer.Typer) -> None:
         eye, target = _vector(look_from, "--look-from"), _vector(look_at, "--look-at")
         if np.linalg.norm(target - eye) < 1e-6:
             raise BadInput("--look-at", None, "must differ from --look-from")
-        if out.suffix.lower() != ".ply":
-            raise BadInput("--out", None, f"expected a .ply file, got {out.name!r}")
+        check_output(out, "--out", suffixes=(".ply",))
+        if png is not None:
+            check_output(png, "--png", suffixes=(".png",))
         reg = registry()
         with Simulation(world, None) as sim:
             params = dict(sim.spec.sensor.params) if sensor in (None, sim.spec.sensor.plugin) else {}
@@ -60,8 +62,11 @@ def register(app: typer.Typer) -> None:
             started = time.perf_counter()
             result = sim.sensor.acquire(sim, target_for(sim.sensor, eye, target, sweep), np.random.default_rng(seed))
             elapsed = time.perf_counter() - started
-        result.write_ply(out_path(out))
         hits = int(result.hits.sum())
+        if hits == 0:
+            raise BadInput("--look-from", look_from, f"the {name} saw nothing from there (no beam returned; "
+                           f"the world's region is around {', '.join(f'{v:.2f}' for v in sim.spec.region_center)})")
+        result.write_ply(out_path(out))
         console.print(f"{name}: {len(result)} beams, {hits} returns in {elapsed * 1000:.0f} ms -> {out}")
         if png is not None:
             save_points_png(result.points(), out_path(png), f"{sim.spec.name}: {name}, {hits} points")

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from explore.errors import BadInput
+from explore.output_paths import check_output
 
 
 def _load(tree: str):
@@ -56,7 +57,7 @@ def register(app: typer.Typer) -> None:
         if format == "dot" and out is None:
             console.print(tree_dot(root).to_string(), markup=False, highlight=False)
             return
-        target = out or Path(f"{parsed.path.stem}.{format}")
+        target = check_output(out, "--out", suffixes=(f".{format}",)) if out else Path(f"{parsed.path.stem}.{format}")
         target.parent.mkdir(parents=True, exist_ok=True)
         written = write_tree_diagram(root, target.parent, target.stem)
         wanted = [p for p in written if p.suffix == f".{format}"]

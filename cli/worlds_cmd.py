@@ -7,6 +7,8 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from explore.errors import BadInput
+
 
 def register(app: typer.Typer) -> None:
     sub = typer.Typer(help="Inspect world files.", no_args_is_help=True)
@@ -22,10 +24,18 @@ def register(app: typer.Typer) -> None:
         table = Table(box=None, header_style="bold")
         for column in ("world", "objects", "robot", "sensor", "file"):
             table.add_column(column)
+        broken = []
         for path in find():
-            spec = load_world_spec(path)
+            try:
+                spec = load_world_spec(path)
+            except BadInput as error:  # one broken file does not hide the others
+                broken.append(error.line())
+                table.add_row(path.stem, "-", "-", "-", f"{path} (broken, see below)")
+                continue
             table.add_row(spec.name, str(len(spec.objects)), spec.robot.plugin, spec.sensor.plugin, str(path))
         console.print(table)
+        for line in broken:
+            console.print(f"broken world file: {line}")
 
     @sub.command("show")
     def show(world: Annotated[str, typer.Argument(help="World name or file.")]) -> None:
@@ -36,7 +46,7 @@ def register(app: typer.Typer) -> None:
 
         with Simulation(world, registry()) as sim:
             info = sim.describe()
-        console.print(f"[bold]{info['name']}[/bold]  {info['file']}")
+        console.print(f"{info['name']}  {info['file']}")
         if info["description"]:
             console.print(info["description"])
         table = Table(box=None, header_style="bold")

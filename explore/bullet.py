@@ -2,41 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from .geometry import pose_from
 from .meshes import TriMesh, box_mesh, cylinder_mesh, read_mesh, sphere_mesh
+from .native_output import captured_output
 from .typed import Pose
 
-
-@contextlib.contextmanager
-def quiet_stdout() -> Iterator[None]:
-    """Silence C-level writes to stdout and stderr (pybullet prints its build time on import)."""
-    import ctypes
-
-    libc = ctypes.CDLL(None)
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = os.dup(1), os.dup(2)
-    with open(os.devnull, "w") as devnull:
-        os.dup2(devnull.fileno(), 1)
-        os.dup2(devnull.fileno(), 2)
-        try:
-            yield
-        finally:
-            libc.fflush(None)  # C stdio buffers what pybullet printed; drop it here
-            for fd, copy in zip((1, 2), saved, strict=True):
-                os.dup2(copy, fd)
-                os.close(copy)
-
-
-with quiet_stdout():
+with captured_output(stdout=True):  # pybullet prints its build time on import
     import pybullet as p  # noqa: E402
 
 pybullet = p

@@ -31,6 +31,7 @@ class Decision:
 
     action: str = CONTINUE
     reason: str = ""
+    outcome: str = ""  # for a stop: SUCCESS (the goal is met), BUDGET or NO_CANDIDATES (explore.outcomes)
 
     @property
     def stop(self) -> bool:

@@ -33,7 +33,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import BadInput
+from .errors import BadInput, brief
+from .outcomes import FINISHED
 
 RESULTS_FILE = "results.csv"
 GRID_FILE = "compare.json"
@@ -62,7 +63,6 @@ METRIC_COLUMNS = (
     "coverage_estimate_per_scan",
     "selection_s_per_scan",
 )
-FINISHED = ("success", "failure")  # a run that reached the end of its tree
 # metrics that measure time (differ between machines); everything else is deterministic
 TIMING_COLUMNS = ("elapsed_s", "wall_s", "selection_s_mean", "selection_s_per_scan", "planning_time_s")
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -448,9 +448,17 @@ def _parse_cell(text: str) -> Any:
 
 
 def read_results(path: Path) -> list[dict[str, Any]]:
-    """Rows of a ``results.csv`` with numbers, booleans and JSON lists parsed."""
-    with open(path, newline="", encoding="utf-8") as handle:
-        return [{k: _parse_cell(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+    """Rows of a ``results.csv`` with numbers, booleans and JSON lists parsed (BadInput if it is not one)."""
+    from .user_files import read_text
+
+    text = read_text(path)
+    try:
+        rows = list(csv.DictReader(io.StringIO(text, newline="")))
+    except csv.Error as error:
+        raise BadInput(str(path), None, f"not a results table: {error}") from None
+    if rows and ("run_id" not in rows[0] or "status" not in rows[0]):
+        raise BadInput(str(path), None, "not a results table of explore compare (no run_id and status columns)")
+    return [{str(k): _parse_cell(v if isinstance(v, str) else "") for k, v in row.items()} for row in rows]
 
 
 # -- the driver ----------------------------------------------------------------------------------
@@ -467,7 +475,8 @@ def check_grid_file(out: Path, grid: Grid) -> None:
         if key in previous and previous[key] != current[key]:
             raise BadInput(
                 str(out), key,
-                f"holds a comparison with {key}={previous[key]!r}, not {current[key]!r}; choose another --out",
+                f"holds a comparison with {key}={brief(previous[key])}, not {brief(current[key])}; "
+                "choose another --out",
             )
 
 

@@ -2,6 +2,19 @@
 
 from __future__ import annotations
 
+import reprlib
+from typing import Any
+
+MAX_LINE = 300  # characters of an error line
+_BRIEF = reprlib.Repr()
+_BRIEF.maxlevel, _BRIEF.maxstring, _BRIEF.maxother, _BRIEF.maxlong = 2, 48, 48, 24
+_BRIEF.maxtuple = _BRIEF.maxlist = _BRIEF.maxdict = _BRIEF.maxset = 4
+
+
+def brief(value: Any) -> str:
+    """A short repr of a user's value for an error line (bounded work for any size of value)."""
+    return _BRIEF.repr(value)
+
 
 class ExploreError(Exception):
     """Base class of the errors explore raises on purpose."""
@@ -17,8 +30,10 @@ class BadInput(ExploreError):
         super().__init__(self.line())
 
     def line(self) -> str:
+        """``file: field: what is wrong`` on one line of at most :data:`MAX_LINE` characters."""
         where = self.source if not self.field else f"{self.source}: {self.field}"
-        return f"{where}: {self.message}"
+        text = " ".join(f"{where}: {self.message}".split())
+        return text if len(text) <= MAX_LINE else text[: MAX_LINE - 1] + "…"
 
 
 class RegistryError(BadInput):
@@ -27,3 +42,7 @@ class RegistryError(BadInput):
 
 class MissionFailed(ExploreError):
     """The run ended without reaching its goal; reported in the metrics (exit code 1)."""
+
+
+class Terminated(KeyboardInterrupt):  # noqa: N818 - a signal, like KeyboardInterrupt
+    """SIGTERM, raised in the main thread: a run ends as on an interrupt (its results written), exit 143."""

@@ -79,16 +79,31 @@ def read_obj(path: Path) -> TriMesh:
     vertices: list[list[float]] = []
     triangles: list[list[int]] = []
     with open(path, encoding="utf-8", errors="replace") as handle:
-        for line in handle:
-            if line.startswith("v "):
-                vertices.append([float(x) for x in line.split()[1:4]])
-            elif line.startswith("f "):
-                refs = [int(token.split("/")[0]) for token in line.split()[1:]]
+        for number, line in enumerate(handle, 1):
+            try:
+                if line.startswith("v "):
+                    vertices.append([float(x) for x in line.split()[1:4]])
+                    if len(vertices[-1]) != 3:
+                        raise ValueError("a vertex needs x, y, z")
+                elif line.startswith("f "):
+                    refs = [int(token.split("/")[0]) for token in line.split()[1:]]
+            except ValueError as error:
+                raise ValueError(f"{path.name} line {number}: {error}") from None
+            if line.startswith("f "):
                 idx = [r - 1 if r > 0 else len(vertices) + r for r in refs]
                 triangles.extend([idx[0], idx[i], idx[i + 1]] for i in range(1, len(idx) - 1))
     if not vertices or not triangles:
         raise ValueError(f"{path}: no triangles")
-    return TriMesh(np.asarray(vertices, dtype=float), np.asarray(triangles, dtype=np.int32))
+    return _checked(TriMesh(np.asarray(vertices, dtype=float), np.asarray(triangles, dtype=np.int64)), path)
+
+
+def _checked(mesh: TriMesh, path: Path) -> TriMesh:
+    """A mesh whose vertices are finite and whose faces index existing vertices, else ValueError."""
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise ValueError(f"{path.name}: a vertex is not a finite number")
+    if mesh.triangles.size and (mesh.triangles.min() < 0 or mesh.triangles.max() >= len(mesh.vertices)):
+        raise ValueError(f"{path.name}: a face refers to a vertex that does not exist")
+    return TriMesh(mesh.vertices, mesh.triangles.astype(np.int32))
 
 
 def read_mesh(path: str | Path) -> TriMesh:
@@ -98,7 +113,10 @@ def read_mesh(path: str | Path) -> TriMesh:
         return read_obj(path)
     import open3d as o3d
 
-    mesh = o3d.io.read_triangle_mesh(str(path))
+    from .native_output import captured_output
+
+    with captured_output():  # Open3D's "[Open3D WARNING] Read ... failed" would come before our one line
+        mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
-        raise ValueError(f"{path}: no triangles")
-    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int32))
+        raise ValueError(f"{path.name}: no triangles (not a readable mesh)")
+    return _checked(TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int64)), path)

@@ -37,6 +37,7 @@ import numpy as np
 from .candidates import STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext, frame_from
 from .metrics import GroundTruthMetrics, coverage_auc
 from .motion import Execution
+from .outcomes import BUDGET, FAILURE, NO_CANDIDATES
 from .scan import Scan, ScanPath
 from .scan_planning import KEEP_FOR_LATER, ScanMotion, ScanPlan, make_planner
 from .typed import Array, Pose
@@ -172,6 +173,8 @@ class ModellingSession:
         self.reason = ""
         self.first_stop: int | None = None
         self.first_stop_reason = ""
+        self.first_stop_outcome = ""
+        self._end_outcome = ""
         self.selection_times: list[float] = []
         self.selection_sizes: list[int] = []
         self._metrics: GroundTruthMetrics | None = None
@@ -424,7 +427,7 @@ class ModellingSession:
     def terminate(self) -> Decision:
         """Ask the termination plugin (and the hard cap); a ``switch`` sets the hole mode."""
         if self.n_scans >= self.max_scans:
-            return Decision(STOP, f"max_scans = {self.max_scans} reached")
+            return Decision(STOP, f"max_scans = {self.max_scans} reached", BUDGET)
         decision = self.termination.decide(self.ctx)
         if decision.action == SWITCH:
             self.ctx.mode = "hole"
@@ -527,24 +530,22 @@ class ModellingSession:
                 return self.finish("failed", f"no reachable initial scan ({self.plan_failure})")
         else:
             if self.n_scans >= self.max_scans:
-                return self.finish("stopped", f"max_scans = {self.max_scans} reached")
+                return self.finish("stopped", f"max_scans = {self.max_scans} reached", BUDGET)
             self.generate()
             candidate = self.select()
             decision = self.terminate()
-            if decision.stop and self.first_stop is None:
-                self.first_stop, self.first_stop_reason = self.n_scans, decision.reason
+            if decision.stop:
+                self.note_stop(decision)
             if decision.stop and not self.continue_after_stop:
-                return self.finish("stopped", decision.reason)
+                return self.finish("stopped", decision.reason, decision.outcome)
             if candidate is None:
-                if self.first_stop is None:
-                    self.first_stop, self.first_stop_reason = self.n_scans, "no candidate left"
-                return self.finish("stopped", "no candidate left")
+                self.note_stop(Decision(STOP, "no candidate left", NO_CANDIDATES))
+                return self.finish("stopped", "no candidate left", NO_CANDIDATES)
             plan = self.plan_best(candidate)
             if plan is None:
                 reason = f"no reachable candidate ({self.plan_failure})"
-                if self.first_stop is None:
-                    self.first_stop, self.first_stop_reason = self.n_scans, reason
-                return self.finish("stopped", reason)
+                self.note_stop(Decision(STOP, reason, NO_CANDIDATES))
+                return self.finish("stopped", reason, NO_CANDIDATES)
         self.execute(plan)
         if self.status != "running":
             return None
@@ -556,10 +557,26 @@ class ModellingSession:
         self.integrate(scan)
         return self.records[-1]
 
-    def finish(self, status: str, reason: str) -> None:
-        """End the session: ``stopped`` (a normal end), ``failed`` or ``collided``, with the reason."""
-        self.status, self.reason = status, reason
+    def finish(self, status: str, reason: str, outcome: str = "") -> None:
+        """End the session: ``stopped`` (a normal end, with its ``outcome``), ``failed`` or ``collided``."""
+        self.status, self.reason, self._end_outcome = status, reason, outcome
         return None
+
+    def note_stop(self, decision: Decision) -> None:
+        """A stop decision; the first one gives n_s (thesis Table 4.5) and the run's outcome."""
+        if self.first_stop is None:
+            self.first_stop, self.first_stop_reason = self.n_scans, decision.reason
+            self.first_stop_outcome = decision.outcome
+
+    @property
+    def outcome(self) -> str:
+        """How the modelling ended (:mod:`explore.outcomes`): a failure or collision fails it; else the
+        first stop decides (scanning on after it, as the thesis benchmark does, changes nothing)."""
+        if self.status in ("failed", "collided"):
+            return FAILURE
+        if self.status == "running":
+            return ""
+        return self.first_stop_outcome or self._end_outcome or BUDGET
 
     def motion_metrics(self) -> dict[str, Any]:
         """Planning success and time, executed trajectories, collisions (see docs/metrics.md)."""

@@ -22,6 +22,13 @@ class Captured:
     text: str = ""
 
 
+def _flush_c_stdio() -> None:
+    import ctypes
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None).fflush(None)
+
+
 @contextlib.contextmanager
 def captured_output(stdout: bool = False) -> Iterator[Captured]:
     """Redirect file descriptor 2 (and 1 with ``stdout``) into a temporary file for the block.
@@ -44,6 +51,7 @@ def captured_output(stdout: bool = False) -> Iterator[Captured]:
             for stream in (sys.stdout, sys.stderr):
                 with contextlib.suppress(Exception):
                     stream.flush()
+            _flush_c_stdio()  # what C code printf'ed sits in stdio's buffers: into the sink with it
             for fd, copy in saved.items():
                 os.dup2(copy, fd)
                 os.close(copy)

@@ -54,6 +54,7 @@ from .motion import (
     truncated_normal,
     truncated_normal_logpdf,
 )
+from .outcomes import BUDGET, FAILURE, NO_CANDIDATES
 from .typed import Array, Points3, Pose
 
 STAGES = (
@@ -512,6 +513,7 @@ class NBVSSession:
         self.plan_log: list[tuple[float, bool]] = []  # (seconds, success) of every planning query
         self.scan_poses: list[np.ndarray] = []  # world_T_sensor of every scan
         self.status, self.reason = "running", ""
+        self.outcome = ""  # how the run ended (explore.outcomes); set with every end
         self._gt: Any = None
 
     # -- helpers -----------------------------------------------------------------------------
@@ -576,7 +578,8 @@ class NBVSSession:
             if not robot.in_collision(q, "known") and np.all(self.obstacles.clearance(robot.link_points(q)) >= 0.0):
                 best, best_q = value, q
         if best == -np.inf:
-            self.status, self.reason = "failed", f"no first view sees the region ({attempts} arm samples tried)"
+            self.status, self.reason, self.outcome = "failed", \
+                f"no first view sees the region ({attempts} arm samples tried)", FAILURE
         self.q = best_q
         robot.q = best_q.copy()
         robot.set_config(best_q)
@@ -821,7 +824,7 @@ class NBVSSession:
     def finished(self) -> bool:
         """True once the run has stopped (after ``max_views`` planned views, a stop or a collision)."""
         if self.status == "running" and len(self.records) > self.max_views:
-            self.status, self.reason = "stopped", f"max_views = {self.max_views} reached"
+            self.status, self.reason, self.outcome = "stopped", f"max_views = {self.max_views} reached", BUDGET
         return self.status != "running"
 
     def no_candidate(self) -> None:
@@ -829,7 +832,8 @@ class NBVSSession:
         for name in STAGES:
             self.stages.setdefault(name, 0)
         empty = next((name for name in STAGES if self.stages[name] == 0), "feasible")
-        self.status, self.reason = "stopped", f"no view/state left after the {empty!r} stage"
+        self.status, self.reason, self.outcome = "stopped", f"no view/state left after the {empty!r} stage", \
+            NO_CANDIDATES
 
     def move(self, best: ViewState, states: list[ViewState], since: int) -> tuple[Execution, ViewRecord]:
         """Execute the chosen view/state; the iteration's record (planning queries from ``since``).
@@ -852,7 +856,8 @@ class NBVSSession:
         )
         if run.collided and self.stop_on_collision:
             record.coverage = self.coverage()
-            self.status, self.reason = "collided", f"collision with {', '.join(run.collisions[0].bodies)}"
+            bodies = ", ".join(run.collisions[0].bodies)
+            self.status, self.reason, self.outcome = "collided", f"collision with {bodies}", FAILURE
         return run, record
 
     def step(self) -> ViewRecord | None:

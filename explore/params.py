@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import BadInput
+from .errors import BadInput, brief
 
 # factor to the SI base of each dimension
 _UNITS: dict[str, tuple[str, float]] = {
@@ -60,7 +60,7 @@ class Param:
         """Return ``value`` converted to this parameter's type and unit, or raise BadInput."""
         if self.type is list:
             if not isinstance(value, list | tuple):
-                raise BadInput(source, field, f"expected a list, got {value!r}")
+                raise BadInput(source, field, f"expected a list, got {brief(value)}")
             if self.length is not None and len(value) != self.length:
                 raise BadInput(source, field, f"expected {self.length} values, got {len(value)}")
             return [_number(v, float, self.unit, source, f"{field}[{i}]") for i, v in enumerate(value)]
@@ -82,14 +82,14 @@ class Param:
             elif isinstance(value, str) and value.lower() in ("false", "no", "0", "off"):
                 out = False
             else:
-                raise BadInput(source, field, f"expected true or false, got {value!r}")
+                raise BadInput(source, field, f"expected true or false, got {brief(value)}")
         elif self.type is str:
             if not isinstance(value, str):
-                raise BadInput(source, field, f"expected a string, got {value!r}")
+                raise BadInput(source, field, f"expected a string, got {brief(value)}")
             out = value
         elif self.type is dict:
             if not isinstance(value, Mapping):
-                raise BadInput(source, field, f"expected a mapping, got {value!r}")
+                raise BadInput(source, field, f"expected a mapping, got {brief(value)}")
             out = dict(value)
         else:
             out = value
@@ -100,28 +100,28 @@ class Param:
 
 def _number(value: Any, kind: type, unit: str, source: str, field: str) -> float | int:
     if isinstance(value, bool):
-        raise BadInput(source, field, f"expected a number, got {value!r}")
+        raise BadInput(source, field, f"expected a number, got {brief(value)}")
     if isinstance(value, int | float):
         number = float(value)
     elif isinstance(value, str):
         match = _QUANTITY.match(value)
         if not match:
-            raise BadInput(source, field, f"expected a number{_with(unit)}, got {value!r}")
+            raise BadInput(source, field, f"expected a number{_with(unit)}, got {brief(value)}")
         number = float(match.group(1))
         given = match.group(2)
         if given and given != unit:
             if given not in _UNITS:
-                raise BadInput(source, field, f"unknown unit {given!r} in {value!r}")
+                raise BadInput(source, field, f"unknown unit {given!r} in {brief(value)}")
             if not unit or unit not in _UNITS or _UNITS[given][0] != _UNITS[unit][0]:
                 raise BadInput(source, field, f"wrong unit {given!r}: expected {unit or 'none'}")
             number = number * _UNITS[given][1] / _UNITS[unit][1]
     else:
-        raise BadInput(source, field, f"expected a number{_with(unit)}, got {value!r}")
+        raise BadInput(source, field, f"expected a number{_with(unit)}, got {brief(value)}")
     if not math.isfinite(number):
-        raise BadInput(source, field, f"{value!r} is not a finite number")
+        raise BadInput(source, field, f"{brief(value)} is not a finite number")
     if kind is int:
         if number != int(number):
-            raise BadInput(source, field, f"expected an integer, got {value!r}")
+            raise BadInput(source, field, f"expected an integer, got {brief(value)}")
         return int(number)
     return number
 
@@ -151,13 +151,17 @@ def validate_params(
 
 def parse_assignment(text: str) -> tuple[str, Any]:
     """Parse a CLI ``key=value`` override; the value is read as YAML (numbers, lists, ...)."""
-    import yaml
+    from .user_files import parse_yaml
 
     if "=" not in text:
-        raise BadInput("--set", text, "expected key=value")
+        raise BadInput("--set", brief(text), "expected key=value")
     key, raw = text.split("=", 1)
+    if not key.strip():
+        raise BadInput("--set", brief(text), "empty key")
     try:
-        value = yaml.safe_load(raw)
-    except yaml.YAMLError:
-        value = raw
+        value = parse_yaml(raw, f"--set {key.strip()}")
+    except BadInput as error:
+        if not error.message.startswith("malformed YAML"):
+            raise
+        value = raw  # not YAML: the text itself
     return key.strip(), value

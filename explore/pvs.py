@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from . import pvs_kernels as K
+from .errors import BadInput
 from .meshes import TriMesh
 from .scan import Scan
 from .typed import Array, Points3
@@ -134,6 +136,48 @@ class RayResult:
         return np.column_stack(np.unravel_index(flat, self.shape))
 
 
+BYTES_PER_VOXEL = 16  # float32 log-odds, int32 frame and visit stamps, the planners' float32 snapshot
+MEMORY_SHARE = 0.5  # a grid may take at most this share of the machine's memory
+
+
+def _human(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n < 1024 or unit == "EiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g}"
+
+
+def memory_limit() -> float:
+    """Bytes a voxel grid may take: :data:`MEMORY_SHARE` of the physical memory."""
+    try:
+        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        total = 8 * 2**30
+    return MEMORY_SHARE * float(total)
+
+
+def check_grid(min_corner: Array, max_corner: Array, resolution: float, source: str = "region",
+               field: str | None = None) -> None:
+    """Reject a dense voxel grid that is ill-defined or would not fit in memory, before allocating it.
+
+    Raises :class:`BadInput` naming the grid's shape and the memory it would need.
+    """
+    lo = np.asarray(min_corner, dtype=float).reshape(3)
+    hi = np.asarray(max_corner, dtype=float).reshape(3)
+    if not (math.isfinite(resolution) and resolution > 0.0):
+        raise BadInput(source, field or "resolution", f"{resolution} is not a positive finite voxel size")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
+        raise BadInput(source, field, "needs finite corners with max > min on every axis")
+    shape = np.ceil((hi - lo) / resolution) + 1
+    need = float(np.prod(shape)) * BYTES_PER_VOXEL
+    if need > memory_limit():
+        dims = " x ".join(f"{v:.3g}" for v in shape)
+        raise BadInput(source, field, f"a {dims} voxel grid at {1e3 * resolution:g} mm would need {_human(need)}, "
+                       f"more than the {_human(memory_limit())} allowed (half this machine's memory): choose a "
+                       "coarser resolution or a smaller region")
+
+
 class PVS:
     """Probabilistic voxel space over an axis-aligned box (thesis Sec. 3.3.2).
 
@@ -214,6 +258,7 @@ class PVS:
         self.independence_cell = self.resolution if independence_cell is None else float(independence_cell)
         self.independence_angle_deg = float(independence_angle_deg)
         self.hit_wins = bool(hit_wins)
+        check_grid(lo, hi, self.resolution)
         self.lattice = np.floor(lo / self.resolution + 1e-9).astype(np.int64)
         upper = np.ceil(hi / self.resolution - 1e-9).astype(np.int64)
         self.log_odds = np.zeros(tuple(int(n) for n in upper - self.lattice), dtype=np.float32)

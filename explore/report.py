@@ -35,8 +35,9 @@ from typing import Any
 
 import numpy as np
 
-FINISHED = ("success", "failure")
-STATUSES = ("success", "failure", "crashed", "timeout")
+from .outcomes import FINISHED
+
+STATUSES = (*FINISHED, "crashed", "timeout")
 METHOD_DIMS = ("strategy", "planner", "robot")
 NOTCH_FACTOR = 1.57
 MISSING = "–"

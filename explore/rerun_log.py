@@ -22,15 +22,12 @@ from typing import Any
 import numpy as np
 
 from .errors import BadInput
+from .output_paths import check_output
 
 
 def check_rerun(path: str | Path) -> None:
     """BadInput unless the Rerun SDK is installed and ``path`` is a writable ``.rrd`` file path."""
-    path = Path(path)
-    if path.suffix != ".rrd":
-        raise BadInput("--rerun", None, f"expected a .rrd file path, got {str(path)!r}")
-    if path.is_dir():
-        raise BadInput("--rerun", None, f"{path} is a folder, expected a file path")
+    check_output(path, "--rerun", suffixes=(".rrd",))
     try:
         import rerun  # noqa: F401
     except ImportError:

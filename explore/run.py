@@ -27,7 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BadInput
+from .errors import BadInput, Terminated
+from .outcomes import BUDGET, FAILURE, INTERRUPTED, SUCCESS
+from .output_paths import check_output
 from .params import parse_assignment, validate_params
 from .planning_clock import work_clock
 
@@ -220,6 +222,13 @@ class RunContext:
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
 
+    def settle(self, timeout: float = 30.0) -> None:
+        """Cancel the queued steps and wait (at most ``timeout``) for the running one to end."""
+        self._worker.close()
+        pending = [f for f in self._futures if not f.done() and not f.cancel()]
+        if pending:
+            wait(pending, timeout=timeout)
+
     def close(self) -> None:
         self._worker.close()
         for future in self._futures:
@@ -271,7 +280,7 @@ def prepare_out_dir(path: Path) -> Path:
 
 @dataclass
 class RunResult:
-    status: str  # "success" | "failure"
+    status: str  # one of explore.outcomes.STATUSES
     reason: str
     metrics: dict[str, Any]
     out_dir: Path
@@ -309,12 +318,16 @@ def execute(
         context.close()
         _remove_run_files(out_dir, created)
         raise
-    except BaseException as error:  # an interrupt or a crash: still leave the metrics behind
+    except BaseException as error:  # an interrupt (SIGINT, SIGTERM) or a crash: still leave the results behind
         from .run_outputs import write_outputs
 
-        reason = "interrupted" if isinstance(error, KeyboardInterrupt) else f"crashed: {type(error).__name__}: {error}"
-        context.trace("end", status="failure", reason=reason)
-        write_outputs(context, tree_file, None, "failure", reason)
+        if isinstance(error, KeyboardInterrupt):
+            status, reason = INTERRUPTED, "terminated (SIGTERM)" if isinstance(error, Terminated) else "interrupted"
+        else:
+            status, reason = FAILURE, f"crashed: {type(error).__name__}: {error}"
+        context.settle()  # the step running in the worker ends before its results are read
+        write_outputs(context, tree_file, context.root, status, reason)
+        context.trace("end", status=status, reason=reason)
         raise
     finally:
         context.close()
@@ -350,13 +363,18 @@ def _tick(config: RunConfig, registry: Any, context: RunContext, tree_file: Any,
         if root.status in (Status.SUCCESS, Status.FAILURE):
             break
         context.wait_for_work(0.1)
-    if root.status == Status.SUCCESS:
-        ends = [getattr(p, "end_reason", "") for p in context.state.values()]
-        status, reason = "success", root.feedback_message or next((e for e in ends if e), "tree succeeded")
+    if root.status == Status.SUCCESS:  # the tree succeeded: did the mission reach its goal?
+        providers = [p for p in context.state.values() if getattr(p, "end_outcome", "")]
+        short = next((p for p in providers if p.end_outcome != SUCCESS), None)
+        if short is not None:
+            status, reason = short.end_outcome, short.end_reason
+        else:
+            ends = [getattr(p, "end_reason", "") for p in context.state.values()]
+            status, reason = SUCCESS, root.feedback_message or next((e for e in ends if e), "tree succeeded")
     elif root.status == Status.FAILURE:
-        status, reason = "failure", _failure_reason(root)
+        status, reason = FAILURE, _failure_reason(root)
     else:
-        status, reason = "failure", f"tree still running after max_ticks={config.max_ticks}"
+        status, reason = BUDGET, f"tree still running after max_ticks={config.max_ticks}"
     tree.shutdown()
     return status, reason, root
 
@@ -381,6 +399,10 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     from .trees import load_tree
     from .world import load_world_spec
 
+    if isinstance(config.seed, bool) or not isinstance(config.seed, int) or config.seed < 0:
+        raise BadInput("--seed", str(config.seed), "must be an integer >= 0")
+    if config.max_scans is not None and (isinstance(config.max_scans, bool) or config.max_scans < 1):
+        raise BadInput("--max-scans", str(config.max_scans), "must be at least 1")
     tree_file = load_tree(config.tree, registry)
     overrides = _behaviour_overrides(config, tree_file, registry)
     spec = load_world_spec(config.world)
@@ -411,14 +433,37 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
         scoped = config.scoped(prefixes[kind])
         if scoped:
             validate_params(info.params, scoped, "--set", f"{prefixes[kind]}.")
+    _check_grid_size(config, tree_file, overrides, spec)
     if config.planning_clock not in PLANNING_CLOCKS:
         raise BadInput("--planning-clock", None,
                        f"{config.planning_clock!r} is not one of {', '.join(PLANNING_CLOCKS)}")
+    if config.out is not None:
+        check_output(config.out, "--out", folder=True)
     if config.rerun is not None:
         from .rerun_log import check_rerun
 
         check_rerun(config.rerun)
     return tree_file, overrides
+
+
+def _check_grid_size(config: RunConfig, tree_file: Any, overrides: dict[str, dict[str, Any]], spec: Any) -> None:
+    """The voxel size (``--set resolution=``, else the tree's) is finite and positive, and the world's
+    region at that size fits in memory: checked before the run starts, not as a MemoryError in it."""
+    from .params import Param
+    from .pvs import check_grid
+
+    if "resolution" in config.settings:
+        resolution = Param("resolution", float, 0.005, "m", low=1e-6).convert(
+            config.settings["resolution"], "--set", "resolution")
+        source, field_ = "--set", "resolution"
+    else:
+        given = [overrides.get(n.behaviour, {}).get("resolution", n.params.get("resolution"))
+                 for n in tree_file.root.walk() if n.behaviour]
+        sizes = [float(size) for size in given if size]
+        if not sizes:
+            return
+        resolution, source, field_ = min(sizes), str(spec.path), "region"
+    check_grid(spec.region_min, spec.region_max, resolution, source, field_)
 
 
 def _failure_reason(root: Any) -> str:

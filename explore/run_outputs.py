@@ -23,6 +23,14 @@ from .run import METRICS_SCHEMA_VERSION, RunContext, _jsonable
 OBJECT_MODELLED = 0.8  # c_a from which an object counts as modelled (the thesis' coverage target)
 
 
+def object_result(coverage: float | None) -> str:
+    """What happened to a modelled object: ``modelled`` (c_a >= :data:`OBJECT_MODELLED`), ``partial``
+    or ``not_seen``."""
+    if coverage is None or coverage <= 0.0:
+        return "not_seen"
+    return "modelled" if coverage >= OBJECT_MODELLED else "partial"
+
+
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON through a temporary file so an interrupt never leaves half a file."""
     tmp = path.with_suffix(path.suffix + ".tmp")
@@ -135,6 +143,11 @@ class ModellingOutputs:
         """Why the modelling ended (the run's reason when the tree succeeds)."""
         return str(self.session.reason)
 
+    @property
+    def end_outcome(self) -> str:
+        """How the modelling ended (:mod:`explore.outcomes`; the run's status when the tree succeeds)."""
+        return self.session.outcome
+
     def live_stats(self) -> dict[str, Any]:
         s = self.session
         stats: dict[str, Any] = {"strategy": self.strategy, "scans": s.n_scans}
@@ -232,11 +245,6 @@ def object_results(session: Any, overall: float | None) -> list[dict[str, Any]]:
             coverage = overall
         else:
             coverage = float(GroundTruthMetrics(sim, gt_mesh=sim.object_mesh(body.name)).coverage(points))
-        if not inside:
-            result = "outside_region"
-        elif coverage is None or coverage <= 0.0:
-            result = "not_seen"
-        else:
-            result = "modelled" if coverage >= OBJECT_MODELLED else "partial"
+        result = object_result(coverage) if inside else "outside_region"
         out.append({"name": body.name, "known": body.known, "coverage": coverage, "result": result})
     return out

@@ -17,6 +17,7 @@ from .bullet import body_visual_meshes, p
 from .errors import BadInput
 from .geometry import pose_from, rpy_deg_to_matrix
 from .meshes import TriMesh, read_mesh
+from .native_output import captured_output
 from .typed import Array, Points3
 from .world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
 
@@ -73,10 +74,11 @@ class Simulation:
         p.setAdditionalSearchPath(str(pybullet_data_path()), physicsClientId=self.client)
         self.bodies: list[GroundTruthBody] = []
         try:
-            for body in self.spec.environment:
-                self._add(body, is_object=False)
-            for body in self.spec.objects:
-                self._add(body, is_object=True)
+            with captured_output(stdout=True):  # pybullet's b3Error / b3Warning and Open3D's warnings
+                for body in self.spec.environment:
+                    self._add(body, is_object=False)
+                for body in self.spec.objects:
+                    self._add(body, is_object=True)
             self._check_region()
         except BaseException:
             self.close()

@@ -8,14 +8,16 @@ Every problem is a :class:`BadInput` naming the file and the node path, e.g.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import BadInput
+from .errors import BadInput, brief
 from .params import validate_params
-from .world import load_yaml, repo_root
+from .user_files import load_yaml
+from .world import repo_root
 
 COMPOSITES = ("sequence", "selector", "parallel")
 DECORATORS = (
@@ -161,7 +163,7 @@ def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, .
         value = data[key]
         if not isinstance(value, expected) or (expected is int and isinstance(value, bool)):
             names = expected.__name__ if isinstance(expected, type) else " or ".join(t.__name__ for t in expected)
-            raise BadInput(file, f"{where}.{key}", f"expected {names}, got {value!r}")
+            raise BadInput(file, f"{where}.{key}", f"expected {names}, got {brief(value)}")
     if kind == "behaviour":
         behaviour = data[kind]
         if not isinstance(behaviour, str):
@@ -170,7 +172,13 @@ def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, .
         params = validate_params(info.params, data.get("params"), file, f"{where}.params.")
         return Node("behaviour", str(data.get("name") or behaviour), {}, [], behaviour, params, file, where)
     if kind == "include":
-        included = load_tree(str(data[kind]), registry, stack)
+        if not isinstance(data[kind], str) or not data[kind]:
+            raise BadInput(file, f"{where}.include", f"expected a tree name or file, got {brief(data[kind])}")
+        try:
+            target = find_tree(data[kind], stack[-1].parent)
+        except BadInput as error:  # name the including file and node, not only the missing name
+            raise BadInput(file, f"{where}.include", f"{brief(data[kind])}: {error.message}") from None
+        included = load_tree(target, registry, stack)
         node = included.root
         if data.get("name"):
             node.name = str(data["name"])
@@ -197,8 +205,8 @@ def _check_values(kind: str, attrs: dict[str, Any], file: str, where: str) -> No
     if kind == "one_shot" and attrs.get("on", "completion") not in ("completion", "success"):
         raise BadInput(file, f"{where}.on", "expected completion or success")
     for key in ("attempts", "times", "max_iterations", "seconds"):
-        if key in attrs and attrs[key] <= 0:
-            raise BadInput(file, f"{where}.{key}", "must be positive")
+        if key in attrs and not (math.isfinite(attrs[key]) and attrs[key] > 0):
+            raise BadInput(file, f"{where}.{key}", f"must be a positive finite number, got {attrs[key]}")
 
 
 def build(node: Node, registry: Any, overrides: dict[str, dict[str, Any]] | None = None, namespace: str = ""):

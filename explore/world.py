@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from .errors import BadInput
+from .errors import BadInput, brief
 from .typed import Array
+from .user_files import load_yaml
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
 TOP_LEVEL_FIELDS = ("name", "description", "environment", "objects", "region", "robot", "sensor", "overview")
@@ -111,21 +111,6 @@ def list_worlds() -> list[Path]:
     return list(seen.values())
 
 
-def load_yaml(path: Path) -> Any:
-    """Read a YAML file; a missing file or a syntax error is a BadInput with the line."""
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as error:
-        raise BadInput(str(path), None, f"cannot read: {error.strerror or error}") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else None
-        problem = getattr(error, "problem", None) or str(error).splitlines()[0]
-        raise BadInput(str(path), where, f"malformed YAML: {problem}") from None
-
-
 class _Fields:
     """Typed access to a YAML mapping that reports BadInput with the field path."""
 
@@ -156,7 +141,7 @@ class _Fields:
             raise BadInput(
                 self.source,
                 self.where(key),
-                f"expected a list of {' or '.join(map(str, sizes))} numbers, got {value!r}",
+                f"expected a list of {' or '.join(map(str, sizes))} numbers, got {brief(value)}",
             )
         return np.array([self._finite(v, f"{self.where(key)}[{i}]") for i, v in enumerate(value)])
 
@@ -168,7 +153,7 @@ class _Fields:
 
     def _finite(self, value: Any, where: str) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise BadInput(self.source, where, f"expected a number, got {value!r}")
+            raise BadInput(self.source, where, f"expected a number, got {brief(value)}")
         if not math.isfinite(value):
             raise BadInput(self.source, where, f"{value} is not a finite number")
         return float(value)
@@ -176,13 +161,13 @@ class _Fields:
     def string(self, key: str, default: Any = ...) -> str:
         value = self.get(key, default)
         if not isinstance(value, str) or not value:
-            raise BadInput(self.source, self.where(key), f"expected a non-empty string, got {value!r}")
+            raise BadInput(self.source, self.where(key), f"expected a non-empty string, got {brief(value)}")
         return value
 
     def boolean(self, key: str, default: Any = ...) -> bool:
         value = self.get(key, default)
         if not isinstance(value, bool):
-            raise BadInput(self.source, self.where(key), f"expected true or false, got {value!r}")
+            raise BadInput(self.source, self.where(key), f"expected true or false, got {brief(value)}")
         return value
 
     def check_unknown(self) -> None:
@@ -294,6 +279,8 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
         ov = _Fields(f.get("overview"), file, "overview")
         overview = np.concatenate([ov.vector("eye", 3), ov.vector("target", 3)])
         ov.check_unknown()
+        if np.linalg.norm(overview[:3] - overview[3:]) < 1e-6:
+            raise BadInput(file, "overview", "eye and target are the same point (the view has no direction)")
     f.check_unknown()
     return WorldSpec(path, name, str(description), environment, objects, rmin, rmax, robot, sensor, overview)
 

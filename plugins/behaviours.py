@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 
 from explore.bt_behaviour import ExploreBehaviour, Outcome, failure, success
+from explore.candidates import STOP, Decision
+from explore.outcomes import NO_CANDIDATES
 from explore.params import Param
 
 
@@ -93,7 +95,8 @@ class PlanMotion(ExploreBehaviour):
             if self.p["initial"]:
                 session.finish("failed", reason)
             else:
-                session.finish("stopped", reason)
+                session.note_stop(Decision(STOP, reason, NO_CANDIDATES))
+                session.finish("stopped", reason, NO_CANDIDATES)
                 self.write("done", True)
                 self.write("reason", reason)
             return failure(reason)
@@ -246,7 +249,8 @@ class SelectNBV(ExploreBehaviour):
         candidate = session.select()  # scores every candidate of the stack in place
         self.write("candidate", candidate)
         if candidate is None:
-            session.finish("stopped", "no candidate left")
+            session.note_stop(Decision(STOP, "no candidate left", NO_CANDIDATES))
+            session.finish("stopped", "no candidate left", NO_CANDIDATES)
             self.write("done", True)
             self.write("reason", "no candidate left")
             self.context.trace("decision", what="select", result="none left")
@@ -271,12 +275,12 @@ class CheckTermination(ExploreBehaviour):
         session = self.read("modelling")
         decision = session.terminate()
         self.context.trace("decision", what="termination", action=decision.action, reason=decision.reason)
-        if decision.stop and session.first_stop is None:
-            session.first_stop, session.first_stop_reason = session.n_scans, decision.reason
+        if decision.stop:
+            session.note_stop(decision)
         if decision.stop and session.continue_after_stop and session.n_scans < session.max_scans:
             return success(f"n_s = {session.first_stop} ({session.first_stop_reason}); scanning on")
         if decision.stop:
-            session.finish("stopped", decision.reason)
+            session.finish("stopped", decision.reason, decision.outcome)
             self.write("done", True)
             self.write("reason", decision.reason)
         return success(f"{decision.action}: {decision.reason}" if decision.reason else decision.action)

@@ -19,6 +19,7 @@ import numpy as np
 
 from explore.bt_behaviour import ExploreBehaviour, Outcome, failure, success
 from explore.params import Param
+from explore.run_outputs import object_result
 
 
 class TreeNBVS:
@@ -37,6 +38,11 @@ class TreeNBVS:
     def end_reason(self) -> str:
         """Why the run ended (the run's reason when the tree succeeds)."""
         return str(self.session.reason)
+
+    @property
+    def end_outcome(self) -> str:
+        """How the run ended (:mod:`explore.outcomes`; the run's status when the tree succeeds)."""
+        return self.session.outcome
 
     # -- steps -------------------------------------------------------------------------------
     def _timed(self, stage: str, fn: Any, *args: Any) -> Any:
@@ -167,7 +173,7 @@ class TreeNBVS:
             "selection_s_per_scan": self.selection_s,
             "stop_reason": s.reason or s.status,
             "objects": [{"name": b.name, "coverage": coverage[-1] if coverage else None,
-                         "result": "modelled" if s.status == "stopped" and coverage else "partial"}
+                         "result": object_result(coverage[-1] if coverage else None)}
                         for b in s.sim.objects()],
         }
 

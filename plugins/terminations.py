@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from explore.candidates import CONTINUE, STOP, SWITCH, Decision, PlanningContext
+from explore.outcomes import BUDGET, NO_CANDIDATES, SUCCESS
 from explore.params import Param
 
 
@@ -39,7 +40,7 @@ class MaxScans(Termination):
 
     def decide(self, ctx: PlanningContext) -> Decision:
         if ctx.iteration >= self.max_scans:
-            return Decision(STOP, f"{ctx.iteration} scans taken (max {self.max_scans})")
+            return Decision(STOP, f"{ctx.iteration} scans taken (max {self.max_scans})", BUDGET)
         return Decision(CONTINUE, "")
 
 
@@ -70,9 +71,9 @@ class CoverageTarget(Termination):
         c = self.estimate(ctx)
         d = float(ctx.density_history[-1]) if ctx.density_history else float(ctx.surface.mean_density())
         if c >= self.coverage and d >= self.density:
-            return Decision(STOP, f"ĉ_m = {c:.3f} >= {self.coverage} and d̄_m = {d:.3f} >= {self.density}")
+            return Decision(STOP, f"ĉ_m = {c:.3f} >= {self.coverage} and d̄_m = {d:.3f} >= {self.density}", SUCCESS)
         if ctx.iteration >= self.n_abort:
-            return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})")
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET)
         history = ctx.coverage_history
         stalled = len(history) >= 2 and history[-1] - history[-2] < self.switch_delta
         if self.switch_delta > 0 and not self.switched and stalled:
@@ -89,9 +90,9 @@ class NoCandidates(Termination):
 
     def decide(self, ctx: PlanningContext) -> Decision:
         if ctx.available == 0 and ctx.iteration > 0:
-            return Decision(STOP, "no candidate left")
+            return Decision(STOP, "no candidate left", NO_CANDIDATES)
         if ctx.iteration >= self.n_abort:
-            return Decision(STOP, f"n_abort = {self.n_abort} scans reached")
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached", BUDGET)
         return Decision(CONTINUE, "")
 
 
@@ -107,9 +108,9 @@ class UnknownBelow(Termination):
     def decide(self, ctx: PlanningContext) -> Decision:
         seen = ctx.best_diagnostics.get("unknown_first", ctx.best_diagnostics.get("unknown"))
         if seen is not None and seen < self.threshold:
-            return Decision(STOP, f"best candidate sees {seen:.0f} < {self.threshold:.0f} unknown voxels")
+            return Decision(STOP, f"best candidate sees {seen:.0f} < {self.threshold:.0f} unknown voxels", SUCCESS)
         if ctx.iteration >= self.n_abort:
-            return Decision(STOP, f"n_abort = {self.n_abort} scans reached")
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached", BUDGET)
         return Decision(CONTINUE, "")
 
 
@@ -127,14 +128,15 @@ class Stagnation(Termination):
 
     def decide(self, ctx: PlanningContext) -> Decision:
         if ctx.iteration >= self.n_abort:
-            return Decision(STOP, f"n_abort = {self.n_abort} scans reached")
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached", BUDGET)
         history = ctx.coverage_history if self.measure == "coverage" else ctx.unknown_history
         if ctx.iteration < self.min_scans or len(history) <= self.window:
             return Decision(CONTINUE, "")
         old, new = float(history[-1 - self.window]), float(history[-1])
         change = abs(new - old) / max(abs(old), 1e-9) if self.measure == "unknown" else abs(new - old)
         if change < self.delta:
-            return Decision(STOP, f"{self.measure} changed by {change:.4f} < {self.delta} over {self.window} scans")
+            return Decision(STOP, f"{self.measure} changed by {change:.4f} < {self.delta} over {self.window} scans",
+                            NO_CANDIDATES)
         return Decision(CONTINUE, "")
 
 

@@ -46,7 +46,7 @@ class _Plugin:
 def test_duplicate_names_fail_with_both_origins() -> None:
     with pytest.raises(RegistryError) as error:
         Registry.load(extra=[("thirdparty", _Plugin())])
-    assert "registered twice: by explore and by thirdparty" in error.value.line()
+    assert "registered twice: by explore-nbv and by thirdparty" in error.value.line()
 
 
 class _Extra:

@@ -111,8 +111,9 @@ BAD_TREES = [
     ("root: {sequence: s, selector: t, children: []}\n", "root: a node needs exactly one type key"),
     ("root: {sequence: s, memroy: true, children: [{behaviour: test_count}]}\n", "root.memroy: unknown attribute"),
     ("root: {retry: r, child: {behaviour: test_count}}\n", "root.attempts: a retry node needs 'attempts'"),
-    ("root: {timeout: t, seconds: -2, child: {behaviour: test_count}}\n", "root.seconds: must be positive"),
-    ("root: {include: missing.yaml}\n", "missing.yaml: no such tree file"),
+    ("root: {timeout: t, seconds: -2, child: {behaviour: test_count}}\n",
+     "root.seconds: must be a positive finite number, got -2"),
+    ("root: {include: missing.yaml}\n", "root.include: 'missing.yaml': no such tree file"),
     ("root: [oops\n", "malformed YAML"),
 ]
 
@@ -297,7 +298,7 @@ def test_cli_rejects_a_bad_tree_with_exit_2(tmp_path, capsys, command, text, mes
         (["--set", "register_scan.iterations=0"], "--set: register_scan.iterations: "),
         (["--set", "tau=0.002"], "--set: tau: unknown setting"),
         (["--world", "atlantis"], "atlantis"),
-        (["--rerun", "out.txt"], "--rerun: expected a .rrd file path"),
+        (["--rerun", "out.txt"], "--rerun: out.txt: expected a .rrd file"),
     ],
 )
 def test_cli_rejects_bad_names_before_creating_the_run(tmp_path, capsys, option, message) -> None:
