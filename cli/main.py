@@ -15,7 +15,11 @@ import typer
 from rich.console import Console
 
 from explore import __version__
+from explore.determinism import THREAD_VARIABLES
 from explore.errors import BadInput, MissionFailed, Terminated
+
+for _name in THREAD_VARIABLES:  # one BLAS thread: sums that do not depend on the thread count (NumPy not loaded yet)
+    os.environ.setdefault(_name, "1")
 
 app = typer.Typer(
     name="explore",

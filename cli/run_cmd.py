@@ -65,6 +65,8 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/...).")] = None,
         rerun: Annotated[Path | None, typer.Option("--rerun", help="Also log to a Rerun .rrd file.")] = None,
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view.")] = False,
+        threads: Annotated[int, typer.Option("--threads", min=0, help="Threads of the numeric kernels (0: every "
+                                             "core); the results are the same for any number.")] = 0,
         planning_clock: Annotated[str, typer.Option(
             "--planning-clock", help="Motion-planning time limits in 'work' done (the same seed gives the same "
             "run under any CPU load) or 'wall' time.")] = "work",
@@ -81,7 +83,7 @@ def register(app: typer.Typer) -> None:
         config = RunConfig(
             tree=tree, world=world, strategy=strategy, planner=planner, robot=robot, sensor=sensor, seed=seed,
             max_scans=max_scans, settings=RunConfig.parse_settings(set_ or []), out=out, rerun=rerun,
-            planning_clock=planning_clock,
+            planning_clock=planning_clock, threads=threads,
         )
         reg = registry()
         interactive = console.is_terminal and not quiet

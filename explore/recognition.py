@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .determinism import open3d_serial
 from .geometry import invert, look_at
 from .meshes import TriMesh
 from .scan import Scan
@@ -838,13 +839,15 @@ class FPFHRansacRecognizer(_RecognizerBase):
         distance = 1.5 * self.voxel
         candidates = []
         for trial in range(self.trials):
-            o3d.utility.random.seed(self.seed + trial)
-            result = reg.registration_ransac_based_on_feature_matching(
-                model_down, scene_down, model_feature, scene_feature, False, distance,
-                reg.TransformationEstimationPointToPoint(False), 3,
-                [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(distance)],
-                reg.RANSACConvergenceCriteria(self.max_iterations, self.confidence),
-            )
+            with open3d_serial():  # per-thread generators: only one thread repeats its draws
+                o3d.utility.random.seed(self.seed + trial)
+                result = reg.registration_ransac_based_on_feature_matching(
+                    model_down, scene_down, model_feature, scene_feature, False, distance,
+                    reg.TransformationEstimationPointToPoint(False), 3,
+                    [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
+                     reg.CorrespondenceCheckerBasedOnDistance(distance)],
+                    reg.RANSACConvergenceCriteria(self.max_iterations, self.confidence),
+                )
             candidates.append((np.asarray(result.transformation).copy(),
                                {"ransac_fitness": float(result.fitness), "trial": trial}))
         return self._finish(cluster, model, cloud, candidates, scans, started)

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from .determinism import open3d_serial
 from .geometry import invert, rotation_angle, transform_points
 from .scan import Scan
 from .typed import Array, Points3, Pose
@@ -407,15 +408,17 @@ def register_pair(
     tgt_pyr = target if isinstance(target, list) else _pyramid(target, voxel, scales)
     transform = _as_pose(init).copy()
     result = None
-    for s, src_c, tgt_c in zip(scales, src_pyr, tgt_pyr, strict=True):
-        result = reg.registration_icp(
-            src_c, tgt_c, 2.5 * voxel * s, transform, reg.TransformationEstimationPointToPlane(),
-            reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6, max_iteration=max_iterations),
-        )
-        transform = np.asarray(result.transformation).copy()
-    assert result is not None
-    distance = 2.5 * voxel * scales[-1]
-    info = np.asarray(reg.get_information_matrix_from_point_clouds(src_pyr[-1], tgt_pyr[-1], distance, transform))
+    with open3d_serial():  # its threads sum the normal equations in a varying order
+        for s, src_c, tgt_c in zip(scales, src_pyr, tgt_pyr, strict=True):
+            result = reg.registration_icp(
+                src_c, tgt_c, 2.5 * voxel * s, transform, reg.TransformationEstimationPointToPlane(),
+                reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6, max_iteration=max_iterations),
+            )
+            transform = np.asarray(result.transformation).copy()
+        assert result is not None
+        distance = 2.5 * voxel * scales[-1]
+        info = np.asarray(reg.get_information_matrix_from_point_clouds(src_pyr[-1], tgt_pyr[-1], distance,
+                                                                       transform))
     count = max(len(result.correspondence_set), 1)
     return IcpResult(
         transform, float(result.fitness), float(result.inlier_rmse), len(result.correspondence_set),

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .determinism import set_threads
 from .errors import BadInput, Terminated
 from .outcomes import BUDGET, FAILURE, INTERRUPTED, SUCCESS
 from .output_paths import check_output
@@ -55,6 +56,7 @@ class RunConfig:
     max_ticks: int = 100000
     rerun: Path | None = None  # --rerun FILE.rrd
     planning_clock: str = "work"  # motion-planning time limits in work done (deterministic) or "wall" time
+    threads: int = 0  # numba / Open3D threads (0: every core); the results do not depend on it
 
     @staticmethod
     def parse_settings(items: list[str]) -> dict[str, Any]:
@@ -301,6 +303,7 @@ def execute(
     path = config.out or default_out_dir(config)
     created = not path.exists()
     out_dir = prepare_out_dir(path)
+    set_threads(config.threads)
     try:
         context = RunContext(config, registry, out_dir)
     except BadInput:

@@ -892,11 +892,13 @@ class SceneSession:
         return name
 
     def _new_name(self) -> str:
-        stem = "".join(ch if ch.isalnum() or ch in "_.-" else "_" for ch in f"{self.sim.spec.name}-{self.run_name}")
+        """A short, stable name for a modelled object: ``<world>-<n>``, the first n free in the database
+        (the run that made it is recorded beside it, not in its name)."""
+        stem = "".join(ch if ch.isalnum() or ch in "_.-" else "_" for ch in self.sim.spec.name)
         k = 1
-        while f"{stem}-obj{k}" in self.db:
+        while f"{stem}-{k}" in self.db:
             k += 1
-        return f"{stem}-obj{k}"
+        return f"{stem}-{k}"
 
     def remember_locations(self) -> None:
         """Record where each recognised object was seen (the database's last known location)."""

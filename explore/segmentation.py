@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from .determinism import open3d_serial
 from .scan import Scan
 from .typed import Array, Points3, Pose
 
@@ -364,11 +365,12 @@ class PlaneClusterSegmenter:
         for attempt in range(self.max_planes):
             if len(remaining) < max(3, self.min_table_points):
                 break
-            o3d.utility.random.seed(self.seed + attempt)
             cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[remaining]))
-            plane, inliers = cloud.segment_plane(
-                self.distance_threshold, 3, self.iterations, probability=self.success_probability
-            )
+            with open3d_serial():  # RANSAC with per-thread generators
+                o3d.utility.random.seed(self.seed + attempt)
+                plane, inliers = cloud.segment_plane(
+                    self.distance_threshold, 3, self.iterations, probability=self.success_probability
+                )
             plane = np.asarray(plane, dtype=float)
             plane /= np.linalg.norm(plane[:3])
             inliers = remaining[np.asarray(inliers, dtype=np.int64)]

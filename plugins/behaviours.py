@@ -248,11 +248,14 @@ class SelectNBV(ExploreBehaviour):
         scored = list(session.stack)
         candidate = session.select()  # scores every candidate of the stack in place
         self.write("candidate", candidate)
-        if candidate is None:
-            session.note_stop(Decision(STOP, "no candidate left", NO_CANDIDATES))
-            session.finish("stopped", "no candidate left", NO_CANDIDATES)
+        if candidate is None:  # nothing left: the termination rule says whether the goal (or budget) came first
+            decision = session.terminate()
+            if not decision.stop:
+                decision = Decision(STOP, "no candidate left", NO_CANDIDATES)
+            session.note_stop(decision)
+            session.finish("stopped", decision.reason, decision.outcome)
             self.write("done", True)
-            self.write("reason", "no candidate left")
+            self.write("reason", decision.reason)
             self.context.trace("decision", what="select", result="none left")
             return success("no candidate left")
         if self.context.rerun is not None:

@@ -230,7 +230,7 @@ def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
                        settings=settings, out=tmp_path / "run")
     result = execute(config, registry)
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
-    assert result.status == "success", result.reason
+    assert result.status == "budget_exhausted" and result.reason == "max_views = 1 reached", result.reason
     assert metrics["expected_utility"] and metrics["k"] == 10 and metrics["strategy"] == "vasquez/eu"
     assert 2 <= metrics["scans"] <= 3 and metrics["trajectories"] == metrics["scans"] - 1
     assert metrics["collisions"] == 0
