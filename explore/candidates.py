@@ -32,6 +32,7 @@ class Decision:
     action: str = CONTINUE
     reason: str = ""
     outcome: str = ""  # for a stop: SUCCESS (the goal is met), BUDGET or NO_CANDIDATES (explore.outcomes)
+    margin: float = float("nan")  # how far the measure was from the rule's threshold (> 0: beyond it)
 
     @property
     def stop(self) -> bool:

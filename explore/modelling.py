@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from .candidates import STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext, frame_from
+from .decisions import pick_best
 from .metrics import GroundTruthMetrics, coverage_auc
 from .motion import Execution
 from .outcomes import BUDGET, FAILURE, NO_CANDIDATES
@@ -62,6 +63,8 @@ class ScanRecord:
     decision: str = ""
     reason: str = ""
     score: float = float("nan")
+    margin: float = float("nan")  # the chosen candidate's lead over the runner-up (explore.decisions)
+    termination_margin: float = float("nan")  # how far the termination rule was from its stop
     step_s: float = 0.0
     coverage: float = float("nan")  # ground-truth c_a, filled by metrics()
 
@@ -262,6 +265,7 @@ class ModellingSession:
         self._pending: dict[str, Any] = {
             "t0": time.perf_counter(), "source": "initial", "info": {"kind": "initial"}, "score": float("nan"),
             "selection_s": 0.0, "candidates": 0, "decision": "", "reason": "", "scan_length": 0.0, "travel": 0.0,
+            "margin": float("nan"), "termination_margin": float("nan"),
         }
 
     def _pend_candidate(self, candidate: Candidate) -> None:
@@ -354,6 +358,7 @@ class ModellingSession:
             coverage_estimate=coverage, coverage_border=float(self.surface.coverage_border()),
             density=self.ctx.density_history[-1], unknown_voxels=self.ctx.unknown_history[-1],
             decision=pending["decision"], reason=pending["reason"], score=pending["score"],
+            margin=pending["margin"], termination_margin=pending["termination_margin"],
             step_s=time.perf_counter() - pending["t0"],
         ))
         self._new_pending()
@@ -416,13 +421,19 @@ class ModellingSession:
             self._pending["selection_s"] = elapsed
         else:
             scores = np.array([c.score for c in items], dtype=float)
-        best = int(np.argmax(np.where(np.isfinite(scores), scores, -np.inf)))
-        chosen = self.stack.pop(best)
+        pick = pick_best(scores)  # near-ties go to the first candidate in stack order
+        chosen = self.stack.pop(pick.index if pick is not None else 0)
+        self._pending["margin"] = pick.margin if pick is not None else float("nan")
         self.ctx.best_diagnostics = dict(chosen.diagnostics)
         if hasattr(self.generator, "remember"):
             self.generator.remember(chosen)
         self._pend_candidate(chosen)
         return chosen
+
+    @property
+    def pending_margin(self) -> float:
+        """The lead of the candidate just selected over the runner-up (explore.decisions)."""
+        return float(self._pending["margin"])
 
     def terminate(self) -> Decision:
         """Ask the termination plugin (and the hard cap); a ``switch`` sets the hole mode."""
@@ -431,7 +442,7 @@ class ModellingSession:
         decision = self.termination.decide(self.ctx)
         if decision.action == SWITCH:
             self.ctx.mode = "hole"
-        self._pending.update(decision=decision.action, reason=decision.reason)
+        self._pending.update(decision=decision.action, reason=decision.reason, termination_margin=decision.margin)
         return decision
 
     def plan(self, candidate: Candidate) -> ScanPlan:

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from .candidates import Candidate, PlanningContext
+from .decisions import pick_best
 from .motion import (
     Execution,
     MotionPlan,
@@ -366,6 +367,7 @@ class ViewState:
     deterministic: float = 0.0  # g(x) (Eq. 4) at the nominal final state
     expected: ExpectedUtility | None = None
     score: float = 0.0
+    margin: float = float("nan")  # lead over the runner-up when chosen (explore.decisions)
 
 
 @dataclass
@@ -376,6 +378,7 @@ class ViewRecord:
     stages: dict[str, int]
     score: float
     deterministic: float
+    margin: float
     expected: float | None
     feasible_share: float  # EU-feasible among the planned candidates
     path_length: float
@@ -587,7 +590,7 @@ class NBVSSession:
 
     def initial(self, attempts: int = 3000) -> ViewRecord:
         """First scan from the first state (:meth:`first_view`)."""
-        record = ViewRecord(0, {}, 0.0, 0.0, None, 1.0, 0.0, 0, False, [])
+        record = ViewRecord(0, {}, 0.0, 0.0, float("nan"), None, 1.0, 0.0, 0, False, [])
         pose = self.first_view(attempts)
         if self.status == "running":
             self.scan(pose, record)
@@ -786,7 +789,11 @@ class NBVSSession:
     def select(self, states: list[ViewState]) -> ViewState | None:
         """argmax of the (expected) utility; None if no candidate is feasible."""
         good = [s for s in states if s.score > 0]
-        return max(good, key=lambda s: s.score) if good else None
+        pick = pick_best([s.score for s in good])  # near-ties go to the first in sampling order
+        if pick is None:
+            return None
+        good[pick.index].margin = pick.margin
+        return good[pick.index]
 
     def execute(self, state: ViewState) -> Execution:
         """Run the controls with positioning noise; collisions are checked in the TRUE world."""
@@ -846,6 +853,7 @@ class NBVSSession:
         queries = self.plan_log[since:]
         record = ViewRecord(
             index=len(self.records), stages=dict(self.stages), score=best.score, deterministic=best.deterministic,
+            margin=best.margin,
             expected=None if best.expected is None else best.expected.value,
             feasible_share=len(feasible) / max(1, len(states)) if self.expected else 1.0,
             path_length=best.length, steps=len(best.plan.controls) if best.plan is not None else 0,

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .decisions import reaches
 from .determinism import open3d_serial
 from .geometry import invert, look_at
 from .meshes import TriMesh
@@ -109,7 +110,7 @@ def accepted(
         if not math.isfinite(h.q_h):
             continue
         partial = h.render_fit >= min_render_fit and h.diagnostics.get("N_m", 0) >= min_matched
-        if h.q_h >= min_q_h or partial:
+        if reaches(h.q_h, min_q_h) or partial:
             out.append(h)
     return out
 

@@ -44,7 +44,7 @@ import numpy as np
 
 from .geometry import invert, transform_points
 from .meshes import TriMesh
-from .recognition import Hypothesis, Model, rivals
+from .recognition import Q_H_MIN, Hypothesis, Model, rivals
 from .registration import FusedPose, PoseGraphResult, fuse_poses, rebase_scan
 from .scan import Scan
 from .scene_motion import Mover, Target, target_start
@@ -52,6 +52,7 @@ from .scene_views import as_target, order_by_novelty, overview_targets, viewing_
 from .segmentation import Cluster, Table
 from .surface import boundary_loops
 from .typed import Array, Points3, Pose
+from .validation import ACCEPT_FROM
 
 UNEXPLAINED, RECOGNISED, AMBIGUOUS, UNKNOWN, MODELLING, MODELLED = (
     "unexplained", "recognised", "ambiguous", "unknown", "modelling", "modelled")
@@ -446,10 +447,20 @@ class SceneSession:
         self._timed("recognise_s", start)
         return obj.hypotheses
 
+    @property
+    def min_q_h(self) -> float:
+        """The recogniser's q_h threshold (Eq. 3.10)."""
+        return float(getattr(self.recognizer, "min_q_h", Q_H_MIN))
+
+    @property
+    def validator_threshold(self) -> float:
+        """The pose validator's v_h threshold (Eq. 3.11)."""
+        return float(getattr(self.validator, "threshold", ACCEPT_FROM))
+
     def _validate_one(self, hypothesis: Hypothesis) -> Hypothesis:
         result = self.validator.validate(self.pvs, self._vertices[hypothesis.model], hypothesis.pose)
         return dataclasses.replace(hypothesis, diagnostics={**hypothesis.diagnostics, "v_h": result.score,
-                                                              "v_accepted": result.accepted})
+                                                              "v_accepted": result.accepted, "v_margin": result.margin})
 
     def validate(self, obj: SceneObject) -> str:
         """Apply the q_h threshold (Eq. 3.10) and the PVS votes (Eq. 3.11); set the object's status.
@@ -464,15 +475,18 @@ class SceneSession:
         obj.rejected = []
         survivors = []
         passed = {id(h) for h in self.recognizer.accept(obj.hypotheses)}
+        min_q_h = self.min_q_h
+        # best q_h first; equal q_h keep the recogniser's order (a stable sort)
         for h in sorted(obj.hypotheses, key=lambda h: -(h.q_h if math.isfinite(h.q_h) else -1.0)):
             if id(h) not in passed:
-                obj.rejected.append({"model": h.model, "q_h": h.q_h, "by": "q_h"})
+                obj.rejected.append({"model": h.model, "q_h": h.q_h, "by": "q_h", "margin": h.q_h - min_q_h})
                 continue
             checked = self._validate_one(h)
             if checked.diagnostics["v_accepted"]:
                 survivors.append(checked)
             else:
-                obj.rejected.append({"model": h.model, "q_h": h.q_h, "v_h": checked.diagnostics["v_h"], "by": "pvs"})
+                obj.rejected.append({"model": h.model, "q_h": h.q_h, "v_h": checked.diagnostics["v_h"], "by": "pvs",
+                                     "margin": checked.diagnostics["v_margin"]})
         self._timed("validate_s", start)
         if not survivors:
             obj.status, obj.model, obj.pose, obj.rivals = UNKNOWN, None, None, []

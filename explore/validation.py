@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .decisions import reaches
 from .geometry import transform_points
 from .typed import Points3, Pose
 
@@ -34,10 +35,11 @@ class Validation:
     unknown: int
     occupied: int
     accepted: bool
+    margin: float = float("nan")  # v_h minus the threshold
 
     def as_dict(self) -> dict[str, Any]:
         return {"score": self.score, "free": self.free, "unknown": self.unknown,
-                "occupied": self.occupied, "accepted": self.accepted}
+                "occupied": self.occupied, "accepted": self.accepted, "margin": self.margin}
 
 
 def pvs_votes(
@@ -69,11 +71,11 @@ def pvs_votes(
     if not 0.0 <= free_below <= occupied_from <= 1.0:
         raise ValueError("need 0 <= free_below <= occupied_from <= 1")
     if len(vertices) == 0:
-        return Validation(0.0, 0, 0, 0, False)
+        return Validation(0.0, 0, 0, 0, False, -threshold)
     p = np.asarray(pvs.probability(transform_points(pose, vertices)), dtype=np.float64)
     free = int(np.count_nonzero(p < free_below))
     occupied = int(np.count_nonzero(p >= occupied_from))
     unknown = len(p) - free - occupied
     denominator = free + 0.5 * unknown + occupied
     score = (0.5 * unknown + occupied) / denominator if denominator > 0 else 0.0
-    return Validation(float(score), free, unknown, occupied, bool(score >= threshold))
+    return Validation(float(score), free, unknown, occupied, reaches(score, threshold), float(score - threshold))

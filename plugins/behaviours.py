@@ -261,7 +261,8 @@ class SelectNBV(ExploreBehaviour):
         if self.context.rerun is not None:
             poses = np.array([c.pose for c in scored])
             self.context.rerun.candidates(poses[:, :3, 3], poses[:, :3, 2], np.array([c.score for c in scored]))
-        self.context.trace("decision", what="select", score=float(candidate.score), source=candidate.source)
+        self.context.trace("decision", what="select", score=float(candidate.score), source=candidate.source,
+                           margin=session.pending_margin)
         return success(f"score {candidate.score:.4g}")
 
 
@@ -277,7 +278,8 @@ class CheckTermination(ExploreBehaviour):
             return success(self.read("reason") or "done")
         session = self.read("modelling")
         decision = session.terminate()
-        self.context.trace("decision", what="termination", action=decision.action, reason=decision.reason)
+        self.context.trace("decision", what="termination", action=decision.action, reason=decision.reason,
+                           margin=decision.margin)
         if decision.stop:
             session.note_stop(decision)
         if decision.stop and session.continue_after_stop and session.n_scans < session.max_scans:

@@ -102,7 +102,7 @@ class TreeNBVS:
     def integrate(self, scan: Any) -> Any:
         from explore.nbvs import ViewRecord
 
-        record = self._pending or ViewRecord(0, {}, 0.0, 0.0, None, 1.0, 0.0, 0, False, [])
+        record = self._pending or ViewRecord(0, {}, 0.0, 0.0, float("nan"), None, 1.0, 0.0, 0, False, [])
         self._pending = None
         self.session.integrate(scan, record)
         self.session.records.append(record)
@@ -342,7 +342,8 @@ class NBVSSelect(ExploreBehaviour):
             self.write("reason", session.session.reason)
             self.context.trace("decision", what="select", result="none", reason=session.session.reason)
             return success(session.session.reason)
-        info = {"score": float(best.score), "deterministic": float(best.deterministic), "path_length": best.length}
+        info = {"score": float(best.score), "deterministic": float(best.deterministic), "path_length": best.length,
+                "margin": best.margin}
         if best.expected is not None:
             info["ess"] = float(best.expected.ess)
         self.context.trace("decision", what="select", **info)

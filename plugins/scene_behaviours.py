@@ -235,7 +235,8 @@ class ValidateObjects(ExploreBehaviour):
             if obj.status in ("unexplained", "unknown", "ambiguous") and obj.hypotheses is not None:
                 scene.validate(obj)
                 self.context.trace("decision", what="validate", object=obj.id, status=obj.status, model=obj.model,
-                                   q_h=obj.q_h, v_h=obj.v_h, rejected=obj.rejected)
+                                   q_h=obj.q_h, v_h=obj.v_h, q_h_margin=obj.q_h - scene.min_q_h,
+                                   v_h_margin=obj.v_h - scene.validator_threshold, rejected=obj.rejected)
         unknown = [o.id for o in scene.by_status("unknown") if o in scene.candidates()]
         ambiguous = [o.id for o in scene.by_status("ambiguous") if o in scene.candidates()]
         self.write("unknown", unknown)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from explore.candidates import CONTINUE, STOP, SWITCH, Decision, PlanningContext
+from explore.decisions import reaches
 from explore.outcomes import BUDGET, NO_CANDIDATES, SUCCESS
 from explore.params import Param
 
@@ -70,16 +71,20 @@ class CoverageTarget(Termination):
     def decide(self, ctx: PlanningContext) -> Decision:
         c = self.estimate(ctx)
         d = float(ctx.density_history[-1]) if ctx.density_history else float(ctx.surface.mean_density())
-        if c >= self.coverage and d >= self.density:
-            return Decision(STOP, f"ĉ_m = {c:.3f} >= {self.coverage} and d̄_m = {d:.3f} >= {self.density}", SUCCESS)
+        margin = min(c - self.coverage, d - self.density)
+        if reaches(c, self.coverage) and reaches(d, self.density):
+            return Decision(STOP, f"ĉ_m = {c:.3f} >= {self.coverage} and d̄_m = {d:.3f} >= {self.density}", SUCCESS,
+                            margin)
         if ctx.iteration >= self.n_abort:
-            return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET)
+            return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET,
+                            margin)
         history = ctx.coverage_history
         stalled = len(history) >= 2 and history[-1] - history[-2] < self.switch_delta
         if self.switch_delta > 0 and not self.switched and stalled:
             self.switched = True
-            return Decision(SWITCH, f"ĉ_m grew by {history[-1] - history[-2]:.4f} < {self.switch_delta}: hole rescan")
-        return Decision(CONTINUE, f"ĉ_m = {c:.3f}, d̄_m = {d:.3f}")
+            return Decision(SWITCH, f"ĉ_m grew by {history[-1] - history[-2]:.4f} < {self.switch_delta}: hole rescan",
+                            margin=margin)
+        return Decision(CONTINUE, f"ĉ_m = {c:.3f}, d̄_m = {d:.3f}", margin=margin)
 
 
 class NoCandidates(Termination):
@@ -107,8 +112,9 @@ class UnknownBelow(Termination):
 
     def decide(self, ctx: PlanningContext) -> Decision:
         seen = ctx.best_diagnostics.get("unknown_first", ctx.best_diagnostics.get("unknown"))
-        if seen is not None and seen < self.threshold:
-            return Decision(STOP, f"best candidate sees {seen:.0f} < {self.threshold:.0f} unknown voxels", SUCCESS)
+        if seen is not None and not reaches(seen, self.threshold):
+            return Decision(STOP, f"best candidate sees {seen:.0f} < {self.threshold:.0f} unknown voxels", SUCCESS,
+                            self.threshold - seen)
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached", BUDGET)
         return Decision(CONTINUE, "")
@@ -134,10 +140,10 @@ class Stagnation(Termination):
             return Decision(CONTINUE, "")
         old, new = float(history[-1 - self.window]), float(history[-1])
         change = abs(new - old) / max(abs(old), 1e-9) if self.measure == "unknown" else abs(new - old)
-        if change < self.delta:
+        if not reaches(change, self.delta):
             return Decision(STOP, f"{self.measure} changed by {change:.4f} < {self.delta} over {self.window} scans",
-                            NO_CANDIDATES)
-        return Decision(CONTINUE, "")
+                            NO_CANDIDATES, self.delta - change)
+        return Decision(CONTINUE, "", margin=self.delta - change)
 
 
 PLUGINS = [MaxScans, CoverageTarget, NoCandidates, UnknownBelow, Stagnation]

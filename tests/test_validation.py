@@ -73,6 +73,7 @@ def test_plugin(registry, scene):
     result = validator.validate_hypothesis(SimpleNamespace(pose=np.eye(4)), pvs, duck.mesh.vertices)
     assert result.score == pytest.approx(pvs_votes(pvs, duck.mesh.vertices, np.eye(4)).score)
     assert result.accepted == (result.score >= 0.9)
-    assert set(result.as_dict()) == {"score", "free", "unknown", "occupied", "accepted"}
+    assert set(result.as_dict()) == {"score", "free", "unknown", "occupied", "accepted", "margin"}
+    assert result.margin == pytest.approx(result.score - 0.9)
     with pytest.raises(ValueError):
         registry.plugins[("pose_validator", "pvs_votes")].create({"free_below": 0.8, "occupied_from": 0.7})
