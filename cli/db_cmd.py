@@ -86,7 +86,8 @@ def register(app: typer.Typer) -> None:
         stored = {}
         with _open(db, create=True) as database:
             if name in database and not replace:
-                raise BadInput(str(database.path), name, "an object of this name exists (remove it first)")
+                raise BadInput(str(database.path), name,
+                               "an object of this name exists (use --replace to overwrite it)")
             if descriptors and len(loaded.triangles):
                 from explore.recognition import Model, model_descriptors
 

@@ -16,7 +16,7 @@ from rich.console import Console
 
 from explore import __version__
 from explore.determinism import THREAD_VARIABLES
-from explore.errors import BadInput, MissionFailed, Terminated
+from explore.errors import MAX_LINE, BadInput, MissionFailed, Terminated
 
 for _name in THREAD_VARIABLES:  # one BLAS thread: sums that do not depend on the thread count (NumPy not loaded yet)
     os.environ.setdefault(_name, "1")
@@ -29,7 +29,7 @@ app = typer.Typer(
     add_completion=False,
 )
 # markup off by default: user text (names, paths, messages) is printed as it is; "[b]" or ":x:" stay text
-console = Console(markup=False, emoji=False, highlight=False)
+console = Console(markup=False, emoji=False, highlight=False, soft_wrap=True)  # lines are not cut or wrapped
 err_console = Console(stderr=True, soft_wrap=True, markup=False, emoji=False, highlight=False)
 
 
@@ -99,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _error_line(line: str, code: int) -> int:
+    line = " ".join(line.split())
+    if len(line) > MAX_LINE:
+        line = line[: MAX_LINE - 1] + "…"
     err_console.print(line, markup=False, highlight=False)
     return code
 

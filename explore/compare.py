@@ -453,7 +453,7 @@ def read_results(path: Path) -> list[dict[str, Any]]:
 
     text = read_text(path)
     try:
-        rows = list(csv.DictReader(io.StringIO(text, newline="")))
+        rows = list(csv.DictReader(io.StringIO(text, newline=""), strict=True))
     except csv.Error as error:
         raise BadInput(str(path), None, f"not a results table: {error}") from None
     if rows and ("run_id" not in rows[0] or "status" not in rows[0]):

@@ -1,4 +1,5 @@
-"""The object database: an SQLite file (WAL mode) with a folder of meshes beside it.
+"""The object database: an SQLite file (rollback journal: one file, nothing beside it at rest) with a folder
+of meshes beside it.
 
 Layout: ``objects.db`` plus ``objects.meshes/`` (one binary PLY per object). The schema is
 versioned with ``PRAGMA user_version`` and stamped with ``PRAGMA application_id`` so that a
@@ -209,9 +210,8 @@ class ObjectDatabase:
                     con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
                 else:
                     _check_identity(self.path, app, version, tables)
-            mode = con.execute("PRAGMA journal_mode = WAL").fetchone()[0]
-            if str(mode).lower() != "wal":  # pragma: no cover - e.g. a network file system
-                con.execute("PRAGMA journal_mode = DELETE")
+            if str(con.execute("PRAGMA journal_mode").fetchone()[0]).lower() != "delete":
+                con.execute("PRAGMA journal_mode = DELETE")  # a file of an older version (WAL): one file at rest
             con.execute("PRAGMA foreign_keys = ON")
             con.execute("PRAGMA synchronous = NORMAL")
         except sqlite3.DatabaseError as error:
@@ -234,6 +234,7 @@ class ObjectDatabase:
         if not self._closed:
             self.connection.close()
             self._closed = True
+
 
     def __enter__(self) -> ObjectDatabase:
         return self

@@ -2,13 +2,27 @@
 
 from __future__ import annotations
 
+import difflib
 import reprlib
+from collections.abc import Sequence
 from typing import Any
 
 MAX_LINE = 300  # characters of an error line
 _BRIEF = reprlib.Repr()
 _BRIEF.maxlevel, _BRIEF.maxstring, _BRIEF.maxother, _BRIEF.maxlong = 2, 48, 48, 24
 _BRIEF.maxtuple = _BRIEF.maxlist = _BRIEF.maxdict = _BRIEF.maxset = 4
+
+
+def valid_names(name: str, valid: Sequence[str], listing: str = "") -> str:
+    """The valid names for an error line: all of them when few, else the close matches and where the rest are."""
+    valid = sorted(valid)
+    if not valid:
+        return "(none exist)"
+    if len(valid) <= 10:
+        return f"(valid: {', '.join(valid)})"
+    close = difflib.get_close_matches(str(name), valid, n=4, cutoff=0.5)
+    where = f"; {listing} lists all {len(valid)}" if listing else f"; {len(valid)} exist"
+    return f"(did you mean {', '.join(close)}?{where})" if close else f"({', '.join(valid[:6])}, ...{where})"
 
 
 def brief(value: Any) -> str:

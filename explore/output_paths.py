@@ -21,18 +21,18 @@ def check_output(path: str | Path, option: str, folder: bool = False, suffixes: 
     report wrongly for root). Missing parent folders are fine: they are created when written.
     """
     text = str(path)
-    if not text.strip() or Path(text).resolve() == Path.cwd().resolve():
-        raise BadInput(option, None, "empty, or the current folder: name a file or a new folder")
     path = Path(text)
-    if suffixes and path.suffix.lower() not in suffixes:
-        raise BadInput(option, text, f"expected a {' or '.join(suffixes)} file")
+    too_long = next((part for part in path.parts if len(part.encode()) > NAME_MAX), None)
+    if too_long is not None:
+        raise BadInput(option, text[:60] + "…", f"a name longer than {NAME_MAX} bytes")
+    if not text.strip() or path.resolve() == Path.cwd().resolve():
+        raise BadInput(option, None, "empty, or the current folder: name a file or a new folder")
     if folder and path.exists() and not path.is_dir():
         raise BadInput(option, text, "exists and is not a folder")
     if not folder and path.is_dir():
         raise BadInput(option, text, "is a folder, expected a file path")
-    too_long = next((part for part in path.parts if len(part.encode()) > NAME_MAX), None)
-    if too_long is not None:
-        raise BadInput(option, text[:60] + "…", f"a name longer than {NAME_MAX} bytes")
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise BadInput(option, text, f"expected a {' or '.join(suffixes)} file")
     existing = path.absolute()
     while not existing.exists():
         existing = existing.parent

@@ -16,7 +16,7 @@ from typing import Any
 
 import pluggy
 
-from .errors import BadInput, RegistryError
+from .errors import BadInput, RegistryError, brief, valid_names
 from .hookspecs import ENTRY_POINT_GROUP, PROJECT, Specs
 from .params import Param, validate_params
 
@@ -148,10 +148,8 @@ class Registry:
         try:
             return self.plugins[(kind, name)]
         except KeyError:
-            valid = ", ".join(self.names(kind)) or "none registered"
-            raise RegistryError(
-                source, field or kind, f"unknown {kind} {name!r} (valid: {valid})"
-            ) from None
+            hint = valid_names(name, self.names(kind), f"`explore plugins list --kind {kind}`")
+            raise RegistryError(source, field, f"unknown {kind} {brief(name)} {hint}") from None
 
     def create(
         self,

@@ -301,7 +301,7 @@ def execute(
     """
     tree_file, overrides = check_inputs(config, registry)
     path = config.out or default_out_dir(config)
-    created = not path.exists()
+    created = _highest_missing(path)  # the folder this run creates (with runs/ if that is new too)
     out_dir = prepare_out_dir(path)
     set_threads(config.threads)
     try:
@@ -386,10 +386,20 @@ RUN_FILES = ("trace.jsonl", "metrics.json", "metrics.json.tmp", "tree.dot", "tre
              "pvs.npz", "coverage.png")
 
 
-def _remove_run_files(out_dir: Path, created: bool) -> None:
-    """Undo a run stopped by bad input: its own files, and the folder if this run created it."""
-    if created:
-        shutil.rmtree(out_dir, ignore_errors=True)
+def _highest_missing(path: Path) -> Path | None:
+    """The outermost folder of ``path`` that does not exist yet (None if ``path`` exists)."""
+    path = path.absolute()
+    if path.exists():
+        return None
+    while not path.parent.exists():
+        path = path.parent
+    return path
+
+
+def _remove_run_files(out_dir: Path, created: Path | None) -> None:
+    """Undo a run stopped by bad input: its own files, and the folders this run created."""
+    if created is not None:
+        shutil.rmtree(created, ignore_errors=True)
         return
     for name in RUN_FILES:
         (out_dir / name).unlink(missing_ok=True)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import BadInput, brief
+from .errors import BadInput, brief, valid_names
 from .params import validate_params
 from .user_files import load_yaml
 from .world import repo_root
@@ -145,9 +145,12 @@ def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, .
     if not isinstance(data, dict):
         raise BadInput(file, where, f"a node is a mapping with one of {', '.join(NODE_TYPES)}")
     types = [k for k in data if k in NODE_TYPES]
-    if len(types) != 1:
-        found = ", ".join(map(str, data)) or "nothing"
-        raise BadInput(file, where, f"a node needs exactly one type key ({', '.join(NODE_TYPES)}); found {found}")
+    if len(types) > 1:
+        raise BadInput(file, where, f"a node needs exactly one node type key; found {', '.join(types)}")
+    if not types:
+        found = ", ".join(brief(k) for k in list(data)[:6]) or "nothing"
+        guess = valid_names(str(next(iter(data), "")), NODE_TYPES, "docs/trees.md")
+        raise BadInput(file, where, f"a node needs exactly one node type key; found {found} {guess}")
     kind = types[0]
     allowed = _ATTRIBUTES[kind]
     for key in data:

@@ -8,6 +8,7 @@ being walked and printed); recursive aliases and absurd nesting are rejected too
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -42,8 +43,9 @@ def load_yaml(path: str | Path) -> Any:
 
 def parse_yaml(text: str, source: str) -> Any:
     """Parse YAML text; every problem is a :class:`BadInput` of ``source`` with the line."""
-    loader = yaml.SafeLoader(text)
+    loader = None
     try:
+        loader = _Loader(text)
         node = loader.get_single_node()
         if node is None:
             return None
@@ -57,7 +59,21 @@ def parse_yaml(text: str, source: str) -> Any:
     except RecursionError:
         raise BadInput(source, None, "malformed YAML: nested too deeply") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
+
+
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2 booleans: only true/false. YAML 1.1 also reads yes/no/on/off
+    as booleans, which turned the tree attribute ``on:`` of a one_shot node into the key True."""
+
+
+_Loader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+                              list("tTfF"))
 
 
 def _line(node: yaml.Node) -> str:

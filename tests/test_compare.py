@@ -464,7 +464,7 @@ def test_crash_and_timeout_are_recorded_and_do_not_stop_the_others(tree_file, tm
 
 
 BAD = [
-    (["--strategies", "nope"], "--strategies: strategy: unknown strategy 'nope' (valid: "),
+    (["--strategies", "nope"], "--strategies: unknown strategy 'nope' ("),
     (["--worlds", ""], "--worlds: empty list"),
     (["--worlds", "atlantis"], "atlantis: no such world file"),
     (["--planners", "warp"], "unknown motion_planner 'warp'"),
