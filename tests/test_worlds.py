@@ -151,3 +151,17 @@ def test_worlds_list_and_show(tmp_path) -> None:
     assert result.returncode == 0, result.stderr
     assert "bunny" in result.stdout and "laser_striper" in result.stdout and "region" in result.stdout
     assert _cli("worlds", "show", "atlantis").returncode == 2
+
+
+def test_worlds_list_marks_a_broken_file_and_lists_the_others(tmp_path) -> None:
+    import os
+
+    (tmp_path / "broken.yaml").write_bytes(b"name: broken\nregion: [oops\n")
+    (tmp_path / "mine.yaml").write_text((Path(__file__).parents[1] / "worlds" / "duck_pedestal.yaml").read_text()
+                                        .replace("name: duck_pedestal", "name: mine"))
+    explore = Path(sys.executable).parent / "explore"
+    done = subprocess.run([str(explore), "worlds", "list"], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "EXPLORE_WORLDS": str(tmp_path)})
+    assert done.returncode == 0, done.stderr
+    assert "bunny_pedestal" in done.stdout and "mine" in done.stdout
+    assert "broken world file:" in done.stdout and "malformed YAML" in done.stdout
