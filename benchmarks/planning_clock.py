@@ -1,4 +1,4 @@
-"""How well the work clock's nominal costs track wall time (explore.planning_clock.COSTS).
+"""How well the work clock's nominal costs track wall time (explore.motion.planning_clock.COSTS).
 
 Plans the queries of ``benchmarks/planners.py`` under the work clock, counts the validity
 checks and planner iterations of each plan, and fits seconds per unit to the plans' wall
@@ -33,10 +33,10 @@ def samples(count: int, log: Any) -> list[dict[str, Any]]:
     from planners import _queries
 
     from explore import planning_clock
-    from explore.motion import MotionProblem
-    from explore.pvs import PVS
-    from explore.registry import Registry
-    from explore.simulation import Simulation
+    from explore.mapping.pvs import PVS
+    from explore.motion.motion import MotionProblem
+    from explore.runtime.registry import Registry
+    from explore.sim.simulation import Simulation
 
     registry = Registry.load()
     out = []
@@ -76,7 +76,7 @@ def fit(records: list[dict[str, Any]], kinds: list[str]) -> dict[str, float]:
 
 
 def main() -> None:
-    from explore.planning_clock import COSTS
+    from explore.motion.planning_clock import COSTS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--queries", type=int, default=8, help="query pairs per world")

@@ -35,11 +35,11 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from explore.acquire import target_for
-from explore.pvs import PVS
-from explore.registry import Registry
-from explore.scan import Scan
-from explore.simulation import Simulation
+from explore.mapping.pvs import PVS
+from explore.runtime.registry import Registry
+from explore.sim.acquire import target_for
+from explore.sim.scan import Scan
+from explore.sim.simulation import Simulation
 
 SCENES = (
     # world, distance of the views (m), resolutions

@@ -4,7 +4,7 @@
     python benchmarks/same_metrics.py --check before.json    # on the new code: lists every difference
 
 Each run's metrics.json and trace.jsonl are kept without wall times, tick numbers and paths
-(:func:`explore.rundiff.comparable`); ``--check`` runs the set again and compares run by run.
+(:func:`explore.runtime.rundiff.comparable`); ``--check`` runs the set again and compares run by run.
 Runs go one at a time with ``--threads 1`` (the result does not depend on it; it keeps the
 two cores for the machine). Exit code 1 if anything differs.
 """
@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from explore.rundiff import comparable, differences, load_run
+from explore.runtime.rundiff import comparable, differences, load_run
 
 EXPLORE = Path(sys.executable).parent / "explore"
 SMALL_NBVS = ["--set", "start_nbvs.n_samples=800", "--set", "start_nbvs.top=6"]

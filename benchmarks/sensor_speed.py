@@ -15,9 +15,9 @@ import time
 
 import numpy as np
 
-from explore.acquire import target_for
-from explore.registry import Registry
-from explore.simulation import Simulation
+from explore.runtime.registry import Registry
+from explore.sim.acquire import target_for
+from explore.sim.simulation import Simulation
 
 
 def _best(fn, repeats: int) -> float:

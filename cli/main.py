@@ -15,8 +15,8 @@ import typer
 from rich.console import Console
 
 from explore import __version__
-from explore.determinism import THREAD_VARIABLES
-from explore.errors import MAX_LINE, BadInput, MissionFailed, Terminated
+from explore.core.determinism import THREAD_VARIABLES
+from explore.core.errors import MAX_LINE, BadInput, MissionFailed, Terminated
 
 for _name in THREAD_VARIABLES:  # one BLAS thread: sums that do not depend on the thread count (NumPy not loaded yet)
     os.environ.setdefault(_name, "1")
@@ -130,13 +130,13 @@ def run() -> None:
 
 def registry():
     """A registry for this CLI invocation (plugins may be blocked with EXPLORE_BLOCK_PLUGINS)."""
-    from explore.registry import Registry
+    from explore.runtime.registry import Registry
 
     blocked = [b for b in os.environ.get("EXPLORE_BLOCK_PLUGINS", "").split(",") if b]
     return Registry.load(blocked=blocked)
 
 
 def out_path(path: Path) -> Path:
-    """An output file path checked by :func:`explore.output_paths.check_output`, its folder created now."""
+    """An output file path checked by :func:`explore.core.output_paths.check_output`, its folder created now."""
     path.parent.mkdir(parents=True, exist_ok=True)
     return path

@@ -7,8 +7,8 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from explore.errors import BadInput
-from explore.registry import KINDS
+from explore.core.errors import BadInput
+from explore.runtime.registry import KINDS
 
 
 def register(app: typer.Typer) -> None:

@@ -74,9 +74,9 @@ def register(app: typer.Typer) -> None:
         """Run an exploration tree on a world; exit 0 on success, 1 if the mission failed."""
         from rich.live import Live
 
-        from explore.errors import Terminated
-        from explore.outcomes import STYLE, SUCCESS
-        from explore.run import RunConfig, default_out_dir, execute
+        from explore.core.errors import Terminated
+        from explore.core.outcomes import STYLE, SUCCESS
+        from explore.runtime.run import RunConfig, default_out_dir, execute
 
         from .main import console, registry
 

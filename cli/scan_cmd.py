@@ -9,12 +9,12 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from explore.errors import BadInput
-from explore.output_paths import check_output
+from explore.core.errors import BadInput
+from explore.core.output_paths import check_output
 
 
 def _vector(text: str, option: str) -> np.ndarray:
-    from explore.geometry import parse_vector
+    from explore.core.geometry import parse_vector
 
     try:
         return parse_vector(text)
@@ -40,10 +40,10 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int, typer.Option("--seed", min=0, help="Noise seed.")] = 0,
     ) -> None:
         """Simulate one scan of a world and write the measured points."""
-        from explore.acquire import target_for
-        from explore.params import parse_assignment
-        from explore.pictures import save_points_png
-        from explore.simulation import Simulation
+        from explore.core.params import parse_assignment
+        from explore.core.pictures import save_points_png
+        from explore.sim.acquire import target_for
+        from explore.sim.simulation import Simulation
 
         from .main import console, out_path, registry
 

@@ -7,12 +7,12 @@ from typing import Annotated
 
 import typer
 
-from explore.errors import BadInput
-from explore.output_paths import check_output
+from explore.core.errors import BadInput
+from explore.core.output_paths import check_output
 
 
 def _load(tree: str):
-    from explore.trees import load_tree
+    from explore.runtime.trees import load_tree
 
     from .main import registry
 
@@ -42,8 +42,8 @@ def register(app: typer.Typer) -> None:
         """Print the tree (unicode), or write it as Graphviz dot or PNG."""
         import py_trees
 
-        from explore.run_outputs import tree_dot, write_tree_diagram
-        from explore.trees import build
+        from explore.runtime.outputs import tree_dot, write_tree_diagram
+        from explore.runtime.trees import build
 
         from .main import console
 
@@ -70,7 +70,7 @@ def register(app: typer.Typer) -> None:
     @sub.command("list")
     def list_() -> None:
         """List the tree files in ./trees, the shipped trees and $EXPLORE_TREES."""
-        from explore.trees import list_trees
+        from explore.runtime.trees import list_trees
 
         from .main import console
 

@@ -1,7 +1,7 @@
 """Behaviour plugins: one per step of the seeds' loops, thin adapters over the library.
 
 Each declares the blackboard keys it reads and writes (in the run's namespace) and calls
-one step of :class:`explore.modelling.ModellingSession`, which keeps the records, so a tree
+one step of :class:`explore.nbv.modelling.ModellingSession`, which keeps the records, so a tree
 and ``ModellingSession.step()`` produce the same metrics. Steps that take long (scanning,
 integrating, registering, planning, moving) are ``blocking``: they run in the run's worker
 thread while the tree keeps ticking.
@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from explore.bt_behaviour import ExploreBehaviour, Outcome, failure, success
-from explore.candidates import STOP, Decision
-from explore.outcomes import NO_CANDIDATES
-from explore.params import Param
+from explore.core.outcomes import NO_CANDIDATES
+from explore.core.params import Param
+from explore.nbv.candidates import STOP, Decision
+from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
 
 
 class StartModelling(ExploreBehaviour):
@@ -38,8 +38,8 @@ class StartModelling(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.modelling import ModellingSession
-        from explore.run_outputs import ModellingOutputs
+        from explore.nbv.modelling import ModellingSession
+        from explore.runtime.outputs import ModellingOutputs
 
         ctx = self.context
         config = ctx.config

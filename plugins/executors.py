@@ -1,8 +1,8 @@
 """Built-in executor plugins: where the runs of ``explore compare`` execute.
 
 An executor has one method, ``run(specs, on_done)``: execute every
-:class:`explore.compare.RunSpec` (each in its own process, see
-:class:`explore.compare.IsolatedRun`) and call ``on_done(spec, row)`` in the calling thread
+:class:`explore.runtime.compare.RunSpec` (each in its own process, see
+:class:`explore.runtime.compare.IsolatedRun`) and call ``on_done(spec, row)`` in the calling thread
 as each run ends. Both built-ins start the very same worker command with the same
 environment, so the same seeds give the same results on either.
 """
@@ -17,10 +17,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from explore.compare import OnDone, RunSpec, run_isolated, run_local
-from explore.errors import BadInput
-from explore.native_output import captured_output
-from explore.params import Param
+from explore.core.errors import BadInput
+from explore.core.native_output import captured_output
+from explore.core.params import Param
+from explore.runtime.compare import OnDone, RunSpec, run_isolated, run_local
 
 
 def _cores() -> int:

@@ -4,7 +4,7 @@ One behaviour per step of Sec. A2/A8 of the digest: start the session, take the 
 state, sample states, run the filter pipeline, plan, score with the deterministic or the
 expected utility (Algorithm 1), select, execute the controls with positioning noise,
 acquire, integrate, check termination. Each is a thin adapter over
-:class:`explore.nbvs.NBVSSession`, kept in ``context.state["nbvs"]`` inside a
+:class:`explore.nbv.nbvs.NBVSSession`, kept in ``context.state["nbvs"]`` inside a
 :class:`TreeNBVS`, which also records what the metrics need (``live_stats``,
 ``run_outputs``).
 """
@@ -17,13 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from explore.bt_behaviour import ExploreBehaviour, Outcome, failure, success
-from explore.params import Param
-from explore.run_outputs import object_result
+from explore.core.params import Param
+from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
+from explore.runtime.outputs import object_result
 
 
 class TreeNBVS:
-    """An :class:`~explore.nbvs.NBVSSession` driven step by step by a tree (records as ``step()``)."""
+    """An :class:`~explore.nbv.nbvs.NBVSSession` driven step by step by a tree (records as ``step()``)."""
 
     def __init__(self, session: Any, strategy: str) -> None:
         self.session = session
@@ -41,7 +41,7 @@ class TreeNBVS:
 
     @property
     def end_outcome(self) -> str:
-        """How the run ended (:mod:`explore.outcomes`; the run's status when the tree succeeds)."""
+        """How the run ended (:mod:`explore.core.outcomes`; the run's status when the tree succeeds)."""
         return self.session.outcome
 
     # -- steps -------------------------------------------------------------------------------
@@ -100,7 +100,7 @@ class TreeNBVS:
         return self.session.acquire(pose)
 
     def integrate(self, scan: Any) -> Any:
-        from explore.nbvs import ViewRecord
+        from explore.nbv.nbvs import ViewRecord
 
         record = self._pending or ViewRecord(0, {}, 0.0, 0.0, float("nan"), None, 1.0, 0.0, 0, False, [])
         self._pending = None
@@ -122,7 +122,7 @@ class TreeNBVS:
 
     def run_outputs(self, out_dir: Any) -> dict[str, Any]:
         """PVS, measured points, coverage and trajectory pictures; the NBVS metrics."""
-        from explore.pictures import save_curves_png, save_points_png
+        from explore.core.pictures import save_curves_png, save_points_png
 
         out_dir = Path(out_dir)
         s = self.session
@@ -205,7 +205,7 @@ class StartNBVS(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.nbvs import NBVSSession
+        from explore.nbv.nbvs import NBVSSession
 
         ctx = self.context
         config = ctx.config

@@ -1,14 +1,14 @@
 """Vasquez-Gomez expected utility as a utility plugin wrapping any other utility.
 
 ``expected_utility`` (kind ``utility``) scores each candidate view or scan path by
-Algorithm 1 of Vasquez-Gomez et al. (:func:`explore.nbvs.expected_utility`): the robot's
+Algorithm 1 of Vasquez-Gomez et al. (:func:`explore.nbv.nbvs.expected_utility`): the robot's
 configuration for the candidate comes from IK, the motion from the current configuration is
 the straight segment in configuration space turned into per-``dt`` velocity controls, k noisy
 rollouts are checked against the known environment and the PVS (unknown is an obstacle),
 and the wrapped utility (``base``) is evaluated at the sampled final sensor poses, weighted
 by their probabilities (Eq. 2-3, 10). A candidate whose straight motion is invalid, that IK
 cannot reach, or that any sampled rollout drives into an obstacle scores 0. For the full
-view/state pipeline with planned motions use :class:`explore.nbvs.NBVSSession`.
+view/state pipeline with planned motions use :class:`explore.nbv.nbvs.NBVSSession`.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from explore.candidates import Candidate, PlanningContext
-from explore.motion import MotionPlan, MotionProblem
-from explore.nbvs import ObstacleField, StateSamples, expected_utility
-from explore.params import Param
-from explore.scan import ScanPath
+from explore.core.params import Param
+from explore.motion.motion import MotionPlan, MotionProblem
+from explore.nbv.candidates import Candidate, PlanningContext
+from explore.nbv.nbvs import ObstacleField, StateSamples, expected_utility
+from explore.sim.scan import ScanPath
 
 
 class ExpectedUtility:
@@ -44,7 +44,7 @@ class ExpectedUtility:
     def base_utility(self) -> Any:
         """The wrapped utility plugin (built on first use from the default registry)."""
         if self._base is None:
-            from explore.registry import Registry
+            from explore.runtime.registry import Registry
 
             self._base = Registry.load().create("utility", self.base, {}, "<expected_utility>")
         return self._base

@@ -2,7 +2,7 @@
 kinodynamic base planner (``ompl.control``) and the straight line for the free flyer.
 
 Every plugin has ``plan(problem, start, goal, seed=None) -> MotionPlan | None`` where
-``problem`` is an :class:`explore.motion.MotionProblem` (validity = known environment +
+``problem`` is an :class:`explore.motion.motion.MotionProblem` (validity = known environment +
 optional PVS free-space test).
 """
 
@@ -12,8 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from explore.errors import BadInput
-from explore.motion import (
+from explore.core.errors import BadInput
+from explore.core.params import Param
+from explore.core.typed import Array
+from explore.motion.motion import (
     OPTIONAL_GEOMETRIC,
     MotionPlan,
     MotionProblem,
@@ -24,8 +26,6 @@ from explore.motion import (
     planner_class,
     straight_line,
 )
-from explore.params import Param
-from explore.typed import Array
 
 
 def _control_choices() -> tuple[str, ...]:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from explore.params import Param
-from explore.typed import Points3, Pose
-from explore.validation import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
+from explore.core.params import Param
+from explore.core.typed import Points3, Pose
+from explore.perception.validation import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
 
 
 class PvsVotes:

@@ -6,8 +6,9 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from explore.params import Param
-from explore.registration import (
+from explore.core.params import Param
+from explore.core.typed import Points3, Pose
+from explore.perception.registration import (
     IcpResult,
     IncrementalPoseGraph,
     PoseGraphResult,
@@ -16,8 +17,7 @@ from explore.registration import (
     pose_graph_from_scans,
     sigmas6,
 )
-from explore.scan import Scan
-from explore.typed import Points3, Pose
+from explore.sim.scan import Scan
 
 
 class _Configured:

@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from explore.bullet import frame_pose, p
-from explore.motion import (
+from explore.core.params import Param
+from explore.core.typed import Array, Points3, Pose
+from explore.motion.motion import (
     BulletCollider,
     CollisionEvent,
     Execution,
@@ -31,12 +32,11 @@ from explore.motion import (
     truncated_normal,
     truncated_normal_logpdf,
 )
-from explore.params import Param
-from explore.robot import Robot
-from explore.typed import Array, Points3, Pose
+from explore.motion.robot import Robot
+from explore.sim.bullet import frame_pose, p
 
 if TYPE_CHECKING:
-    from explore.simulation import Simulation
+    from explore.sim.simulation import Simulation
 
 IK_POSITION_TOL = 1e-3  # m, FK/IK round trip
 IK_ANGLE_TOL = math.radians(0.5)
@@ -186,7 +186,7 @@ class _BulletRobot(Robot):
 
     def _part_point_sets(self, spacing: float) -> list[tuple[Part, Points3]]:
         """(part, points in its link frame) on every part's visual geometry and extra meshes."""
-        from explore.meshes import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
+        from explore.sim.meshes import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 
         sets = []
         for part in self.parts:
@@ -532,7 +532,7 @@ class _BulletRobot(Robot):
         size = np.asarray(self.sensor_size, dtype=float)
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=(size / 2).tolist(), physicsClientId=self.client)
         body = p.createMultiBody(0.0, shape, -1, physicsClientId=self.client)
-        from explore.meshes import box_mesh
+        from explore.sim.meshes import box_mesh
 
         mesh = box_mesh(size)
         return body, mesh
@@ -809,7 +809,7 @@ class MobileManipulator(_BulletRobot):
         self.chain = _ArmChain(self, self.urdf, self.flange_link, _planar(x, y, math.radians(yaw)) @ self.base_T_arm)
         self.dof = 3 + len(self.chain.joints)
         self.base_body = self._box_body(size)
-        from explore.meshes import box_mesh
+        from explore.sim.meshes import box_mesh
 
         self.flange_T_sensor = _pose6(self.mount)
         self._housing, housing_mesh = self._sensor_housing()
@@ -958,7 +958,7 @@ class MobileBase(_BulletRobot):
 
     def attach(self, sim: Simulation) -> None:
         super().attach(sim)
-        from explore.meshes import box_mesh, cylinder_mesh, sphere_mesh
+        from explore.sim.meshes import box_mesh, cylinder_mesh, sphere_mesh
 
         size = np.asarray(self.base_size, dtype=float)
         mast_len = self.camera_height - self.ground_clearance - size[2] - 0.08
@@ -1095,7 +1095,7 @@ class FreeFlyer(_BulletRobot):
             part = Part(self.body, -1, "sensor")
             self.parts = [part]
             self.collider = BulletCollider(sim.client, self.parts)
-            from explore.meshes import sphere_mesh
+            from explore.sim.meshes import sphere_mesh
 
             self._part_meshes = {part: [sphere_mesh(self.radius)]}
             self._sample_part_points()

@@ -1,6 +1,6 @@
 """Behaviour plugins of scene exploration (Kriegel thesis Fig. 3.1) and Görner's table patrol.
 
-Thin adapters over :class:`explore.scene.SceneSession`: the session lives in
+Thin adapters over :class:`explore.scene.session.SceneSession`: the session lives in
 ``context.state["scene"]`` as a :class:`SceneRun`, which gives the live status line and the
 ``metrics.json`` fields. Blackboard keys (in the run's namespace): ``scene`` (the run),
 ``unknown`` / ``ambiguous`` (object ids still to explain), ``object`` (the current one in a
@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.bt_behaviour import ExploreBehaviour, Outcome, failure, success
-from explore.params import Param
-from explore.recognition import Q_H_MIN
+from explore.core.params import Param
+from explore.perception.recognition import Q_H_MIN
+from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
 
 
 class SceneRun:
@@ -136,8 +136,8 @@ class StartScene(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.database import ObjectDatabase, default_path
-        from explore.scene import SceneSession
+        from explore.perception.database import ObjectDatabase, default_path
+        from explore.scene.session import SceneSession
 
         ctx, p = self.context, self.p
         config = ctx.config
@@ -390,7 +390,7 @@ class SurroundTable(ExploreBehaviour):
     def work(self) -> Outcome:
         import math
 
-        from explore.scene_patrol import known_tables, surround
+        from explore.scene.patrol import known_tables, surround
 
         run = self.read("scene")
         scene = run.session
@@ -413,7 +413,7 @@ class ListTables(ExploreBehaviour):
     writes = ("tables",)
 
     def work(self) -> Outcome:
-        from explore.scene_patrol import known_tables
+        from explore.scene.patrol import known_tables
 
         names = list(known_tables(_scene(self).sim))
         self.write("tables", names)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from explore.candidates import CONTINUE, STOP, SWITCH, Decision, PlanningContext
-from explore.decisions import reaches
-from explore.outcomes import BUDGET, NO_CANDIDATES, SUCCESS
-from explore.params import Param
+from explore.core.decisions import reaches
+from explore.core.outcomes import BUDGET, NO_CANDIDATES, SUCCESS
+from explore.core.params import Param
+from explore.nbv.candidates import CONTINUE, STOP, SWITCH, Decision, PlanningContext
 
 
 class Termination:

@@ -3,7 +3,7 @@
 A utility's ``score(candidates, ctx)`` returns one value per candidate (higher is better)
 and fills ``candidate.diagnostics``. The ray-based utilities simulate the candidate's beams
 (``sensor.beams`` with a beam stride and a frame spacing) through a snapshot of the PVS with
-one shared numba pass (:mod:`explore.visibility`), then combine the accumulated numbers.
+one shared numba pass (:mod:`explore.mapping.visibility`), then combine the accumulated numbers.
 """
 
 from __future__ import annotations
@@ -12,11 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.candidates import Candidate, PlanningContext, collision_free_share
-from explore.params import Param
-from explore.scan import ScanPath
-from explore.typed import Points3
-from explore.visibility import (
+from explore.core.params import Param
+from explore.core.typed import Points3
+from explore.mapping.visibility import (
     ACC_NAMES,
     ENTROPY,
     HITS,
@@ -34,6 +32,8 @@ from explore.visibility import (
     TraceSettings,
     trace,
 )
+from explore.nbv.candidates import Candidate, PlanningContext, collision_free_share
+from explore.sim.scan import ScanPath
 
 RAY_PARAMS = (
     Param("beam_stride", int, 4, "", "use every n-th beam of a stripe / pixel (thesis: every 4th)", low=1),
@@ -94,7 +94,7 @@ def beams_of(ctx: PlanningContext, candidates: list[Candidate], beam_stride: int
 
 
 class RayUtility(Utility):
-    """A utility computed from simulated beams (see :mod:`explore.visibility`)."""
+    """A utility computed from simulated beams (see :mod:`explore.mapping.visibility`)."""
 
     params = RAY_PARAMS
 

@@ -1,7 +1,7 @@
 """Built-in view generators: sphere, boundary search, hole rescan, boundary + hole, random.
 
-A view generator's ``generate(ctx)`` returns new :class:`~explore.candidates.Candidate`
-objects for the candidate stack, given the :class:`~explore.candidates.PlanningContext`
+A view generator's ``generate(ctx)`` returns new :class:`~explore.nbv.candidates.Candidate`
+objects for the candidate stack, given the :class:`~explore.nbv.candidates.PlanningContext`
 (PVS, surface model, sensor, history; never the ground truth). Candidates are scan paths for
 line sensors and single views for area sensors.
 """
@@ -12,7 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from explore.candidates import (
+from explore.core.geometry import fibonacci_sphere
+from explore.core.params import Param
+from explore.core.typed import Array, Points3
+from explore.mapping.visibility import first_blocked
+from explore.nbv.candidates import (
     Candidate,
     PlanningContext,
     RepairSettings,
@@ -23,11 +27,7 @@ from explore.candidates import (
     repair,
     segments_hit_boxes,
 )
-from explore.geometry import fibonacci_sphere
-from explore.params import Param
-from explore.scan import ScanPath
-from explore.typed import Array, Points3
-from explore.visibility import first_blocked
+from explore.sim.scan import ScanPath
 
 
 class ViewGenerator:

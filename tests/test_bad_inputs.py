@@ -23,7 +23,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from explore.errors import MAX_LINE, BadInput
+from explore.core.errors import MAX_LINE, BadInput
 
 BAD = Path(__file__).parent / "bad_inputs"
 EXPLORE = Path(sys.executable).parent / "explore"
@@ -66,8 +66,8 @@ def catalogue_snapshot() -> dict[str, str]:
 @pytest.fixture
 def sandbox(tmp_path, monkeypatch, registry):
     """The case's working directory with {file}, {db} and {mesh}; EXPLORE_DB points into it."""
-    from explore.database import ObjectDatabase
-    from explore.meshes import box_mesh
+    from explore.perception.database import ObjectDatabase
+    from explore.sim.meshes import box_mesh
 
     work = tmp_path / "work"
     work.mkdir()
@@ -232,7 +232,7 @@ _FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCh
 @_FUZZ
 @given(data=st.data())
 def test_world_parser_fuzzing(data, tmp_path_factory) -> None:
-    from explore.world import load_world_spec
+    from explore.sim.world import load_world_spec
 
     if data.draw(st.booleans()):
         document = data.draw(_DOC)
@@ -250,7 +250,7 @@ def test_world_parser_fuzzing(data, tmp_path_factory) -> None:
 @_FUZZ
 @given(text=st.text(max_size=200))
 def test_world_parser_fuzzing_raw_text(text, tmp_path_factory) -> None:
-    from explore.world import load_world_spec
+    from explore.sim.world import load_world_spec
 
     file = tmp_path_factory.mktemp("fuzz") / "world.yaml"
     file.write_text(text, encoding="utf-8")
@@ -263,7 +263,7 @@ def test_world_parser_fuzzing_raw_text(text, tmp_path_factory) -> None:
 @_FUZZ
 @given(data=st.data())
 def test_tree_parser_fuzzing(data, registry, tmp_path_factory) -> None:
-    from explore.trees import load_tree
+    from explore.runtime.trees import load_tree
 
     if data.draw(st.booleans()):
         document = data.draw(_DOC)

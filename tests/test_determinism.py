@@ -1,6 +1,6 @@
 """Same seed, same run: every shipped tree on one of its worlds, run twice at the same time, once with
 one thread and once with every thread beside a busy process, gives the same metrics.json and the
-same trace apart from wall times, tick numbers and paths (explore.rundiff)."""
+same trace apart from wall times, tick numbers and paths (explore.runtime.rundiff)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from explore.rundiff import run_differences
-from explore.trees import list_trees
+from explore.runtime.rundiff import run_differences
+from explore.runtime.trees import list_trees
 
 EXPLORE = Path(sys.executable).parent / "explore"
 SMALL_NBVS = ["--set", "start_nbvs.n_samples=800", "--set", "start_nbvs.top=6", "--set", "strategy.k=10"]

@@ -7,9 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from explore.geometry import look_at
-from explore.meshes import TriMesh, sphere_mesh
-from explore.metrics import (
+from explore.core.geometry import look_at
+from explore.mapping.metrics import (
     GroundTruthMetrics,
     SelectionTimer,
     chamfer,
@@ -20,12 +19,13 @@ from explore.metrics import (
     rms_error,
     sample_surface,
 )
-from explore.scan import ScanPath
+from explore.sim.meshes import TriMesh, sphere_mesh
+from explore.sim.scan import ScanPath
 
 
 @pytest.fixture(scope="module")
 def bunny(registry):
-    from explore.simulation import Simulation
+    from explore.sim.simulation import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         yield sim, GroundTruthMetrics(sim)
@@ -122,8 +122,8 @@ def test_ground_truth_itself_and_half_of_it(bunny) -> None:
 
 
 def test_noise_free_scans_are_accurate_and_coverage_rises(bunny) -> None:
-    from explore.acquire import target_for
-    from explore.surface import SurfaceModel
+    from explore.mapping.surface import SurfaceModel
+    from explore.sim.acquire import target_for
 
     sim, metrics = bunny
     sensor = sim.sensor

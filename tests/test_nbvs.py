@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from explore.motion import MotionPlan, MotionProblem
-from explore.nbvs import (
+from explore.motion.motion import MotionPlan, MotionProblem
+from explore.nbv.nbvs import (
     STAGES,
     NBVSSession,
     ObstacleField,
@@ -17,7 +17,7 @@ from explore.nbvs import (
     rollout_batch,
     samples_needed,
 )
-from explore.simulation import Simulation
+from explore.sim.simulation import Simulation
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +140,7 @@ def test_log_probability_is_the_truncated_normal_density() -> None:
     """log P (Eq. 2-3) = sum of scipy's truncated-normal log densities over the sampled errors."""
     from scipy.stats import truncnorm
 
-    from explore.motion import truncated_normal, truncated_normal_logpdf
+    from explore.motion.motion import truncated_normal, truncated_normal_logpdf
 
     sigma = np.array([1.65e-3, 0.28, 0.0])
     eps = truncated_normal(np.random.default_rng(3), sigma, 40)
@@ -172,9 +172,9 @@ def test_expected_utility_weights_and_effective_sample_size(cluttered) -> None:
 
 
 def _free_flyer_context(sim, registry):
-    from explore.candidates import PlanningContext
-    from explore.pvs import PVS
-    from explore.visibility import VoxelGrid
+    from explore.mapping.pvs import PVS
+    from explore.mapping.visibility import VoxelGrid
+    from explore.nbv.candidates import PlanningContext
 
     pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
     prob = (1.0 / (1.0 + np.exp(-pvs.log_odds.astype(np.float64)))).astype(np.float32)
@@ -187,8 +187,8 @@ def _free_flyer_context(sim, registry):
 
 def test_expected_utility_plugin_wraps_any_utility(registry) -> None:
     """Without noise EU equals the wrapped utility; with noise a path 5 mm from the pedestal scores 0."""
-    from explore.candidates import Candidate
-    from explore.geometry import look_at
+    from explore.core.geometry import look_at
+    from explore.nbv.candidates import Candidate
 
     with Simulation("bunny_pedestal", registry) as sim:
         robot = sim.robot
@@ -218,8 +218,8 @@ def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
     without noise (EU still scores with the noise model), with the metrics and pictures."""
     import json
 
-    from explore.run import RunConfig, execute
-    from explore.trees import load_tree
+    from explore.runtime.run import RunConfig, execute
+    from explore.runtime.trees import load_tree
 
     tree = load_tree("nbvs_mobile", registry)
     assert {n.behaviour for n in tree.root.walk() if n.behaviour} >= {

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.database import ObjectDatabase
-from explore.geometry import look_at
-from explore.recognition import (
+from explore.core.geometry import look_at
+from explore.perception.database import ObjectDatabase
+from explore.perception.recognition import (
     Q_H_MIN,
     Hypothesis,
     Model,
@@ -44,7 +44,7 @@ sensor:
 @pytest.fixture(scope="module")
 def scene(registry, tmp_path_factory):
     """Tabletop overview scan, its clusters, and a database with all six objects (ground truth meshes)."""
-    from explore.simulation import Simulation
+    from explore.sim.simulation import Simulation
 
     with Simulation("tabletop", registry) as sim:
         ov = sim.spec.overview
@@ -231,9 +231,9 @@ def test_stored_descriptors_are_reused(registry, scene):
 
 def test_duck_touching_a_block(registry, tmp_path):
     """Bad input: an object touching another gives one cluster; PPF still finds the duck."""
-    from explore.database import object_frame
-    from explore.segmentation import PlaneClusterSegmenter
-    from explore.simulation import Simulation
+    from explore.perception.database import object_frame
+    from explore.perception.segmentation import PlaneClusterSegmenter
+    from explore.sim.simulation import Simulation
 
     path = tmp_path / "touching.yaml"
     path.write_text(TOUCHING_WORLD)
@@ -251,11 +251,11 @@ def test_duck_touching_a_block(registry, tmp_path):
 
 
 def test_empty_cluster_and_no_models(scene):
-    from explore.segmentation import Cluster
+    from explore.perception.segmentation import Cluster
 
     scan, clusters, models, truth = scene
     empty = Cluster(0, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    from explore.recognition import FPFHRansacRecognizer, VFHRecognizer
+    from explore.perception.recognition import FPFHRansacRecognizer, VFHRecognizer
 
     for recognizer in (PPFRecognizer(), FPFHRansacRecognizer(), VFHRecognizer()):
         assert recognizer.recognize(empty, models, scan) == []
@@ -266,7 +266,7 @@ def test_symmetric_poses_are_not_rivals():
     """A cube turned by 90 deg puts its surface where it was: the same explanation, not an ambiguity."""
     from scipy.spatial.transform import Rotation
 
-    from explore.meshes import box_mesh
+    from explore.sim.meshes import box_mesh
 
     box = box_mesh(np.array([0.1, 0.1, 0.08]))
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from explore.errors import BadInput, RegistryError
-from explore.hookspecs import hookimpl
-from explore.params import Param, validate_params
-from explore.registry import Registry
+from explore.core.errors import BadInput, RegistryError
+from explore.core.params import Param, validate_params
+from explore.runtime.hookspecs import hookimpl
+from explore.runtime.registry import Registry
 
 
 def test_builtins_are_found_through_the_entry_point(registry) -> None:

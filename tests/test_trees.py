@@ -8,13 +8,13 @@ import threading
 
 import pytest
 
-from explore.bt_behaviour import ExploreBehaviour, failure, success
-from explore.errors import BadInput
-from explore.hookspecs import hookimpl
-from explore.params import Param
-from explore.registry import Registry
-from explore.run import RunConfig, execute
-from explore.trees import build, load_tree
+from explore.core.errors import BadInput
+from explore.core.params import Param
+from explore.runtime.behaviour import ExploreBehaviour, failure, success
+from explore.runtime.hookspecs import hookimpl
+from explore.runtime.registry import Registry
+from explore.runtime.run import RunConfig, execute
+from explore.runtime.trees import build, load_tree
 
 
 class Count(ExploreBehaviour):
@@ -93,7 +93,7 @@ root:
 
 
 def test_shipped_trees_validate(registry) -> None:
-    from explore.trees import list_trees
+    from explore.runtime.trees import list_trees
 
     trees = list_trees()
     assert {"model_object"} <= {p.stem for p in trees}
@@ -323,7 +323,7 @@ def test_bad_input_never_touches_an_existing_folder(tmp_path, capsys) -> None:
 
 def test_tree_picture_labels_are_plain_text(tmp_path, registry) -> None:
     """py_trees' Unicode symbols (missing glyphs in Graphviz fonts) become words."""
-    from explore.run_outputs import tree_dot
+    from explore.runtime.outputs import tree_dot
 
     root = build(load_tree("model_object", registry).root, registry)
     labels = [n.get("label") for n in tree_dot(root).get_nodes() if n.get("label")]

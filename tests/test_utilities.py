@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.candidates import Candidate, CandidateStack, PlanningContext, frame_from
-from explore.sensing import RaySensor
-from explore.visibility import (
+from explore.mapping.visibility import (
     ENTROPY,
     HITS,
     OCC_FIRST,
@@ -21,6 +19,8 @@ from explore.visibility import (
     first_blocked,
     trace,
 )
+from explore.nbv.candidates import Candidate, CandidateStack, PlanningContext, frame_from
+from explore.sim.sensing import RaySensor
 
 RES = 0.01
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.candidates import (
+from explore.mapping.surface import border_edges, boundary_loops, holes_of, vertex_normals_of
+from explore.mapping.visibility import VoxelGrid
+from explore.nbv.candidates import (
     BETAS_DEG,
     Candidate,
     CandidateStack,
@@ -19,10 +21,8 @@ from explore.candidates import (
     rotation,
     segments_hit_boxes,
 )
-from explore.meshes import TriMesh
-from explore.scan import ScanPath
-from explore.surface import border_edges, boundary_loops, holes_of, vertex_normals_of
-from explore.visibility import VoxelGrid
+from explore.sim.meshes import TriMesh
+from explore.sim.scan import ScanPath
 
 
 class MeshSurface:

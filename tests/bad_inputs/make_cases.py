@@ -238,8 +238,8 @@ def write_databases() -> None:
         con.execute("CREATE TABLE contacts (name TEXT, phone TEXT)")
         con.execute("INSERT INTO contacts VALUES ('a', '1')")
     con.close()
-    from explore.database import ObjectDatabase
-    from explore.meshes import box_mesh
+    from explore.perception.database import ObjectDatabase
+    from explore.sim.meshes import box_mesh
 
     good = out / "_good.db"
     with ObjectDatabase.open(good, create=True) as db:

@@ -12,9 +12,9 @@ import numpy as np
 from explore_plugins.strategies import make_strategy
 from explore_plugins.utilities import RAY_PARAMS, RayUtility
 
-from explore.hookspecs import hookimpl
-from explore.params import Param
-from explore.visibility import ENTROPY
+from explore.core.params import Param
+from explore.mapping.visibility import ENTROPY
+from explore.runtime.hookspecs import hookimpl
 
 
 class TravelIG(RayUtility):

@@ -1,0 +1,91 @@
+"""Rigid transforms and camera frames.
+
+Sensor frames follow the OpenCV convention: z looks forward, x to the right, y down.
+Poses are 4x4 homogeneous matrices named ``world_T_frame``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from explore.core.typed import Array, Points3, Pose
+
+WORLD_UP = np.array([0.0, 0.0, 1.0])
+
+
+def pose_from(position: Array, rotation: Array | None = None) -> Pose:
+    """Homogeneous matrix from a position and a 3x3 rotation (identity if omitted)."""
+    pose = np.eye(4)
+    pose[:3, 3] = position
+    if rotation is not None:
+        pose[:3, :3] = rotation
+    return pose
+
+
+def rpy_deg_to_matrix(rpy_deg: Array) -> Array:
+    """Rotation from roll, pitch, yaw in degrees (fixed axes x, y, z, as URDF)."""
+    return Rotation.from_euler("xyz", rpy_deg, degrees=True).as_matrix()
+
+
+def look_at(eye: Array, target: Array, up: Array = WORLD_UP) -> Pose:
+    """world_T_sensor for a sensor at ``eye`` whose optical axis (z) points at ``target``."""
+    eye = np.asarray(eye, dtype=float)
+    forward = np.asarray(target, dtype=float) - eye
+    norm = np.linalg.norm(forward)
+    if norm < 1e-9:
+        raise ValueError("look_at: eye and target coincide")
+    z = forward / norm
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-6:  # looking straight up or down: pick any right vector
+        x = np.cross(z, np.array([1.0, 0.0, 0.0]))
+        if np.linalg.norm(x) < 1e-6:
+            x = np.cross(z, np.array([0.0, 1.0, 0.0]))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return pose_from(eye, np.column_stack([x, y, z]))
+
+
+def transform_points(pose: Pose, points: Points3) -> Points3:
+    """Apply a 4x4 transform to (n, 3) points."""
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+def invert(pose: Pose) -> Pose:
+    """Inverse of a rigid transform."""
+    out = np.eye(4)
+    out[:3, :3] = pose[:3, :3].T
+    out[:3, 3] = -pose[:3, :3].T @ pose[:3, 3]
+    return out
+
+
+def rotation_angle(a: Pose, b: Pose) -> float:
+    """Angle in radians of the rotation between two poses."""
+    r = a[:3, :3].T @ b[:3, :3]
+    return float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def rotate_about_axis(pose: Pose, axis_local: Array, angle: float) -> Pose:
+    """Rotate a pose about one of its own axes through its origin."""
+    out = pose.copy()
+    out[:3, :3] = pose[:3, :3] @ Rotation.from_rotvec(np.asarray(axis_local) * angle).as_matrix()
+    return out
+
+
+def fibonacci_sphere(n: int) -> Points3:
+    """``n`` nearly uniform unit vectors (Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1.0 - 2.0 * i / n)
+    theta = np.pi * (1.0 + 5.0**0.5) * i
+    return np.column_stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)])
+
+
+def parse_vector(text: str, n: int = 3) -> Array:
+    """Parse ``"x,y,z"`` into a finite float vector of length ``n`` (ValueError otherwise)."""
+    parts = [p for p in text.replace(" ", "").split(",") if p]
+    if len(parts) != n:
+        raise ValueError(f"expected {n} comma-separated numbers, got {text!r}")
+    values = np.array([float(p) for p in parts])
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{text!r} contains NaN or inf")
+    return values

@@ -1,0 +1,1 @@
+"""Motion: robots, validity checking, OMPL planners, noisy execution and the planning clock."""

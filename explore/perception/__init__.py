@@ -1,0 +1,3 @@
+"""Perception: segmentation, recognition, registration, PVS validation of hypotheses, and the
+object database.
+"""

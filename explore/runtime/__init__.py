@@ -1,0 +1,3 @@
+"""Runtime: the plugin registry and hooks, behaviour trees, runs and their outputs, comparisons and
+reports.
+"""

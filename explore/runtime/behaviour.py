@@ -1,0 +1,129 @@
+"""Base class of the behaviour plugins: declared blackboard keys, non-blocking work, reasons.
+
+A behaviour is a thin adapter over the library. It declares the blackboard keys it reads
+and writes (py_trees clients with access rights, in the run's namespace), does its work in
+:meth:`work` and reports failures with a reason that ends up in the trace. Work that takes
+long (motion, scanning, planning) sets ``blocking = True``: it then runs in the run's
+worker thread and :meth:`update` returns RUNNING until the result is there.
+"""
+
+from __future__ import annotations
+
+import traceback
+from abc import abstractmethod
+from concurrent.futures import Future
+from typing import Any
+
+import py_trees
+from py_trees.common import Access, Status
+
+
+class Outcome:
+    """What :meth:`ExploreBehaviour.work` returns: a status and a reason."""
+
+    __slots__ = ("status", "reason")
+
+    def __init__(self, status: Status, reason: str = "") -> None:
+        self.status = status
+        self.reason = reason
+
+
+def success(reason: str = "") -> Outcome:
+    return Outcome(Status.SUCCESS, reason)
+
+
+def failure(reason: str) -> Outcome:
+    return Outcome(Status.FAILURE, reason)
+
+
+class ExploreBehaviour(py_trees.behaviour.Behaviour):
+    """Base of explore's behaviour plugins (kind ``behaviour``)."""
+
+    kind = "behaviour"
+    name = "behaviour"  # registered name (instances get their display name from the tree)
+    params: tuple = ()
+    reads: tuple[str, ...] = ()
+    writes: tuple[str, ...] = ()
+    blocking = False
+    is_condition = False  # a condition's FAILURE is an answer, not an error: not traced as failure
+
+    def __init__(self, name: str, **params: Any) -> None:
+        super().__init__(name=name)
+        self.p = params
+        self.context: Any = None
+        self.bb: py_trees.blackboard.Client | None = None
+        self._future: Future | None = None
+        self.tree_path = ""
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def setup(self, **kwargs: Any) -> None:
+        """Receive the run context and register the declared blackboard keys."""
+        self.context = kwargs["context"]
+        self.bb = self.attach_blackboard_client(name=self.name, namespace=self.context.namespace)
+        for key in self.reads:
+            self.bb.register_key(key, access=Access.READ)
+        for key in self.writes:
+            self.bb.register_key(key, access=Access.WRITE)
+
+    def initialise(self) -> None:
+        self.feedback_message = ""
+        if self.blocking:
+            self._future = self.context.submit(self._guarded)
+
+    def update(self) -> Status:
+        if self.blocking:
+            if self._future is None or not self._future.done():
+                return Status.RUNNING
+            outcome = self._future.result()
+            self._future = None
+        else:
+            outcome = self._guarded()
+        self.feedback_message = outcome.reason
+        if outcome.status == Status.FAILURE and not self.is_condition:
+            self.context.trace("failure", node=self.name, behaviour=type(self).name, reason=outcome.reason)
+        return outcome.status
+
+    def terminate(self, new_status: Status) -> None:
+        """Interrupted while its step runs (a timeout, or the tree left the branch): drop the step.
+
+        A step not yet started is cancelled; a running one finishes in the background and
+        the run's later steps do not wait for it (:class:`explore.runtime.run.Worker`).
+        """
+        if new_status == Status.INVALID and self._future is not None:
+            self.context.abandon(self._future, self.name)
+            self._future = None
+
+    # -- work --------------------------------------------------------------------------------
+    def _guarded(self) -> Outcome:
+        from explore.core.errors import BadInput
+
+        try:
+            outcome = self.work()
+        except BadInput:
+            raise
+        except Exception as error:  # noqa: BLE001 - a failing step fails the node with its reason
+            self.context.trace(
+                "exception", node=self.name, error=f"{type(error).__name__}: {error}", traceback=traceback.format_exc()
+            )
+            return failure(f"{type(error).__name__}: {error}")
+        if outcome is None:
+            return success()
+        if isinstance(outcome, Outcome):
+            return outcome
+        if isinstance(outcome, Status):
+            return Outcome(outcome)
+        raise TypeError(f"{type(self).__name__}.work returned {outcome!r}")
+
+    @abstractmethod
+    def work(self) -> Outcome | Status | None:
+        """Do the step; return an Outcome (None means success)."""
+
+    # -- blackboard helpers ----------------------------------------------------------------------
+    def read(self, key: str, default: Any = None) -> Any:
+        try:
+            return self.bb.get(key)
+        except KeyError:
+            return default
+
+    def write(self, key: str, value: Any) -> None:
+        self.bb.set(key, value, overwrite=True)

@@ -1,0 +1,174 @@
+"""Plugin registry: pluggy hooks, entry-point discovery, lookup by (kind, name).
+
+Built-in plugins are found through the same ``explore.plugins`` entry point as third-party
+packages. One broken plugin package does not break the CLI: its load error is recorded and
+shown by ``explore plugins list`` (set ``EXPLORE_STRICT_PLUGINS=1`` to raise instead).
+``EXPLORE_DISABLE_PLUGIN_AUTOLOAD=1`` skips third-party entry points (the built-ins stay).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import metadata
+from typing import Any
+
+import pluggy
+
+from explore.core.errors import BadInput, RegistryError, brief, valid_names
+from explore.core.params import Param, validate_params
+from explore.runtime.hookspecs import ENTRY_POINT_GROUP, PROJECT, Specs
+
+KINDS: tuple[str, ...] = (
+    "sensor",
+    "robot",
+    "motion_planner",
+    "view_generator",
+    "utility",
+    "termination",
+    "strategy",
+    "segmenter",
+    "recognizer",
+    "pose_validator",
+    "registrar",
+    "behaviour",
+    "executor",
+)
+BUILTIN_DISTRIBUTION = "explore-nbv"  # the distribution name (PyPI's "explore" is an unrelated package)
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """A registered plugin: how to build it and what it accepts."""
+
+    kind: str
+    name: str
+    factory: Callable[..., Any]
+    params: tuple[Param, ...]
+    doc: str
+    origin: str  # distribution (package) that registered it
+
+    def create(self, values: Mapping[str, Any] | None = None, source: str = "<params>") -> Any:
+        """Validate ``values`` against the declared parameters and build the plugin."""
+        return self.factory(**validate_params(self.params, values, source))
+
+
+@dataclass
+class Registry:
+    """All plugins known in this process, by kind and name."""
+
+    plugins: dict[tuple[str, str], PluginInfo] = field(default_factory=dict)
+    load_errors: dict[str, str] = field(default_factory=dict)
+    manager: pluggy.PluginManager | None = None
+
+    @classmethod
+    def load(
+        cls,
+        entry_points: bool = True,
+        extra: Iterable[tuple[str, object]] = (),
+        blocked: Sequence[str] = (),
+    ) -> Registry:
+        """Discover plugins through the ``explore.plugins`` entry points (and ``extra``)."""
+        pm = pluggy.PluginManager(PROJECT)
+        pm.add_hookspecs(Specs)
+        registry = cls(manager=pm)
+        origins: dict[str, str] = {}
+        autoload = entry_points and not os.environ.get("EXPLORE_DISABLE_PLUGIN_AUTOLOAD")
+        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            dist = ep.dist.name if ep.dist is not None else ep.value
+            is_builtin = dist == BUILTIN_DISTRIBUTION
+            if ep.name in blocked or pm.is_registered(ep.name) or not (autoload or is_builtin):
+                continue
+            try:
+                plugin = ep.load()
+            except Exception as error:  # noqa: BLE001 - a broken package must not break the CLI
+                if os.environ.get("EXPLORE_STRICT_PLUGINS"):
+                    raise
+                registry.load_errors[f"{dist}:{ep.name}"] = f"{type(error).__name__}: {error}"
+                continue
+            name = f"{dist}:{ep.name}"
+            if pm.is_registered(plugin):  # the same module through a second (stale) distribution
+                continue
+            pm.register(plugin, name=name)
+            origins[name] = dist
+        if not any(d == BUILTIN_DISTRIBUTION for d in origins.values()):
+            # running from a source tree that was never installed: register built-ins directly
+            import explore_plugins
+
+            pm.register(explore_plugins, name=f"{BUILTIN_DISTRIBUTION}:builtins")
+            origins[f"{BUILTIN_DISTRIBUTION}:builtins"] = BUILTIN_DISTRIBUTION
+        for name, plugin in extra:
+            pm.register(plugin, name=name)
+            origins[name] = name
+        pm.check_pending()
+        for impl in pm.hook.explore_register_plugins.get_hookimpls():
+            origin = origins.get(impl.plugin_name, impl.plugin_name)
+            impl.function(register=registry._registrar(origin))
+        return registry
+
+    def _registrar(self, origin: str) -> Callable[..., PluginInfo]:
+        def register(
+            factory: Callable[..., Any],
+            kind: str | None = None,
+            name: str | None = None,
+            params: Sequence[Param] | None = None,
+            doc: str | None = None,
+        ) -> PluginInfo:
+            kind = kind or getattr(factory, "kind", None)
+            name = name or getattr(factory, "name", None)
+            if kind not in KINDS:
+                raise RegistryError(origin, "kind", f"{kind!r} is not a plugin kind {list(KINDS)}")
+            if not name:
+                raise RegistryError(origin, kind, "plugin registered without a name")
+            params = tuple(params if params is not None else getattr(factory, "params", ()))
+            doc = doc if doc is not None else (factory.__doc__ or "").strip().splitlines()[:1]
+            doc = doc if isinstance(doc, str) else (doc[0] if doc else "")
+            info = PluginInfo(kind, name, factory, params, doc, origin)
+            existing = self.plugins.get((kind, name))
+            if existing is not None:
+                raise RegistryError(
+                    origin,
+                    f"{kind} {name!r}",
+                    f"registered twice: by {existing.origin} and by {origin}",
+                )
+            self.plugins[(kind, name)] = info
+            return info
+
+        return register
+
+    def names(self, kind: str) -> list[str]:
+        """Sorted names of the plugins of one kind."""
+        return sorted(name for (k, name) in self.plugins if k == kind)
+
+    def get(self, kind: str, name: str, source: str = "<lookup>", field: str | None = None) -> PluginInfo:
+        """The plugin (kind, name); an unknown name fails with the list of valid names."""
+        if kind not in KINDS:
+            raise RegistryError(source, field, f"unknown plugin kind {kind!r} (valid: {', '.join(KINDS)})")
+        try:
+            return self.plugins[(kind, name)]
+        except KeyError:
+            hint = valid_names(name, self.names(kind), f"`explore plugins list --kind {kind}`")
+            raise RegistryError(source, field, f"unknown {kind} {brief(name)} {hint}") from None
+
+    def create(
+        self,
+        kind: str,
+        name: str,
+        params: Mapping[str, Any] | None = None,
+        source: str = "<params>",
+        field: str | None = None,
+    ) -> Any:
+        """Look up and build a plugin with validated parameters."""
+        info = self.get(kind, name, source, field)
+        prefix = f"{field}.params." if field else ""
+        values = validate_params(info.params, params, source, prefix)
+        try:
+            return info.factory(**values)
+        except ValueError as error:  # a plugin's own consistency check on its parameters
+            raise BadInput(source, f"{field or kind} {name}", str(error)) from None
+
+    def of_kind(self, kind: str | None = None) -> list[PluginInfo]:
+        """Plugins sorted by kind and name, optionally of one kind only."""
+        items = [p for p in self.plugins.values() if kind is None or p.kind == kind]
+        return sorted(items, key=lambda p: (KINDS.index(p.kind), p.name))

@@ -1,0 +1,3 @@
+"""Scene exploration: the scene session (segment, recognise, validate, model, store), its motion,
+views, patrol and metrics.
+"""

@@ -1,0 +1,388 @@
+"""Moving the robot to a view for scene exploration: IK, planning, noisy execution, odometry.
+
+The scene session asks for a sensor target (a pose or, for line sensors, a scan path);
+:class:`Mover` finds a configuration (the robot plugin's IK, for scan paths the 10 mm
+portion IK of :func:`explore.motion.motion.linear_scan_path_ik`), plans a collision-free motion with
+a motion-planner plugin (known environment plus the scene PVS: nothing may enter space the
+PVS has seen occupied), and executes it with the robot's positioning noise
+(``Robot.execute``, Vasquez-Gomez Sec. A6). The free flyer is the thesis' sensor without a
+robot: it moves in a straight line without noise.
+
+The robot's *belief* about where its sensor is comes from odometry: the base advances by
+the nominal (noise-free) motion of the executed controls, the arm joints are measured
+exactly. With a noisy base the believed pose drifts from the true one; scans are recorded at
+the believed pose and the gtsam pose graph (:mod:`explore.perception.registration`) corrects them. The
+true pose is kept for the metrics only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from explore.core.geometry import invert
+from explore.core.typed import Array, Points3, Pose
+from explore.sim.scan import ScanPath
+
+Target = Pose | ScanPath
+
+
+@dataclass
+class Move:
+    """The outcome of one motion to a view.
+
+    ``target`` is where the sensor really is (what the simulated sensor uses), ``believed``
+    where the robot thinks its sensor is at the start of the target (odometry/kinematics);
+    both are world_T_sensor (OpenCV frame).
+    """
+
+    target: Target
+    believed: Pose
+    travel_m: float
+    planning_s: float
+    collisions: int
+    planner: str
+
+
+def _split_drive(robot: Any, plan: Any, base_dofs: tuple[int, ...], length: float) -> tuple[Any, Any]:
+    """(first leg, rest) of a plan at ``length`` metres of base travel; rest None when the
+    plan drives less than 1.5 x ``length`` (no short last leg)."""
+    from explore.motion.motion import MotionPlan
+
+    if plan.controls is None:
+        controls, path = robot.controls_from_path(plan.path)
+        plan = MotionPlan(path, controls=controls, dt=float(robot.dt), planner=plan.planner)
+    xy = np.asarray(plan.path, dtype=float)[:, list(base_dofs[:2])]
+    travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    if travel[-1] < 1.5 * length:
+        return plan, None
+    k = int(np.searchsorted(travel, length))
+    first = MotionPlan(plan.path[: k + 1], controls=plan.controls[:k], dt=plan.dt, planner=plan.planner)
+    rest = MotionPlan(plan.path[k:], controls=plan.controls[k:], dt=plan.dt, planner=plan.planner)
+    return first, rest
+
+
+def target_start(target: Target) -> Pose:
+    return target.start if isinstance(target, ScanPath) else np.asarray(target, dtype=float)
+
+
+def _planar(x: float, y: float, theta: float) -> Pose:
+    out = np.eye(4)
+    c, s = math.cos(theta), math.sin(theta)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:2, 3] = (x, y)
+    return out
+
+
+def _planar_params(pose: Pose) -> tuple[float, float, float]:
+    return float(pose[0, 3]), float(pose[1, 3]), math.atan2(pose[1, 0], pose[0, 0])
+
+
+class Mover:
+    """Moves a simulation's robot to sensor targets and tracks its believed sensor pose.
+
+    Parameters
+    ----------
+    sim : Simulation with robot and sensor attached
+    registry : plugin registry (for the motion planner)
+    planner : motion-planner plugin name; default ``tuck_and_drive`` for an arm on a base
+        (a robot with ``travel_joints``: the base drives only with the arm tucked, so its
+        odometry drifts only while it drives; RRT-Connect in the full 10-D space finds no
+        path among furniture, benchmarks/planners.py), else ``rrt_connect`` (an arm; the mobile
+        base's pan-tilt head); the free flyer moves in a straight line
+    noise : execute with the robot's positioning noise
+    occupied_from : PVS probability from which a robot point counts as colliding
+    seed : seeds IK restarts and the execution noise
+    planning_time : time limit of one motion plan (s on the planning clock,
+        :mod:`explore.motion.planning_clock`); generous, so that the path simplification normally runs
+        to completion (on the wall clock a limit hit under CPU load changes the path, the noise
+        drawn along it and so the run)
+    min_path_fraction : shortest reachable share of a scan path that is still scanned
+    """
+
+    def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
+                 occupied_from: float = 0.75, seed: int = 0, planning_time: float = 10.0,
+                 min_path_fraction: float = 0.4) -> None:
+        self.sim = sim
+        self.robot = sim.robot
+        self.noise = bool(noise)
+        self.occupied_from = float(occupied_from)
+        self.min_path_fraction = float(min_path_fraction)
+        self.rng = np.random.default_rng(seed)
+        self.pvs: Any = None
+        self.free_flyer = self.robot is None or self.robot.name == "free_flyer"
+        self.planner = None
+        if not self.free_flyer:
+            default = "tuck_and_drive" if hasattr(self.robot, "travel_joints") else "rrt_connect"
+            self.planner = registry.create("motion_planner", planner or default,
+                                           {"time_limit": planning_time}, "<scene>")
+        self.base_dofs: tuple[int, ...] = tuple(getattr(self.robot, "base_dofs", ()) or ())
+        self.believed_q: Array | None = None if self.robot is None else np.asarray(self.robot.q, dtype=float).copy()
+        self.travel_m = 0.0
+        self.collisions = 0
+        self.failed_moves = 0
+        self._pose: Pose | None = None  # free flyer: current sensor pose
+        self._last_path: np.ndarray | None = None  # configurations of the last execution
+        self._odometry_var = np.zeros(2)  # (translation m^2, rotation rad^2) since the last view
+
+    # -- queries ---------------------------------------------------------------------------
+    @property
+    def true_pose(self) -> Pose | None:
+        """The sensor's true world pose (metrics only)."""
+        if self.free_flyer:
+            return self._pose
+        return self.robot.fk(self.robot.q)
+
+    def believed_pose(self) -> Pose | None:
+        """The sensor pose the robot believes it has."""
+        if self.free_flyer:
+            return self._pose
+        pose = self.robot.fk(self.believed_q)
+        self.robot.set_config(self.robot.q)  # fk may move the bodies
+        return pose
+
+    def plausible(self, eye: Array, focus: Array) -> bool:
+        """Cheap pre-filter before IK: a fixed-base arm only sees objects from its own side
+        (its eye is not farther from the base than the object); anything else passes."""
+        base = getattr(self.robot, "base_pose", None)
+        if self.free_flyer or self.base_dofs or base is None:
+            return True
+        here = np.asarray(base)[:2, 3]
+        return float(np.linalg.norm(eye[:2] - here)) <= float(np.linalg.norm(focus[:2] - here)) + 0.05
+
+    def reach(self, target: Target) -> tuple[Target, list] | None:
+        """(target, configurations) realising ``target``, or None if unreachable.
+
+        A view needs one IK solution. A scan path needs IK for every 2 cm portion with
+        continuity (:func:`explore.motion.motion.linear_scan_path_ik`); if only a leading part of at
+        least ``min_path_fraction`` is reachable, the path is shortened to that part.
+        """
+        if self.free_flyer:
+            return target, []
+        robot = self.robot
+        if isinstance(target, ScanPath):
+            from explore.motion.motion import linear_scan_path_ik
+
+            ik = linear_scan_path_ik(robot, target, step=0.02, rng=self.rng)
+            if ik.reachable < 2 or ik.fraction < self.min_path_fraction:
+                return None
+            if not ik.complete:
+                end = target.end.copy()
+                end[:3, 3] = ik.poses[ik.reachable - 1][:3, 3]
+                target = ScanPath(target.start, end, target.speed)
+            return target, list(ik.configs)
+        q = robot.ik(np.asarray(target, dtype=float), self.rng)
+        return None if q is None else (target, [q])
+
+    def laser_points(self, frame: Pose, rng: np.random.Generator, beams: int = 720) -> Points3 | None:
+        """A planar 360-degree scan of the base's localisation laser (robot parameter
+        ``laser_height`` > 0) at the base's true pose, in ``frame`` (the true sensor pose the
+        view's scan is recorded at: the arm joints are measured, so the robot knows where its
+        laser is relative to its camera); None without a laser. Görner's robot localises
+        with such a scanner (AMCL)."""
+        height = float(getattr(self.robot, "laser_height", 0.0) or 0.0)
+        if not self.base_dofs or height <= 0.0:
+            return None
+        ix, iy, ith = self.base_dofs
+        q = np.asarray(self.robot.q, dtype=float)
+        angles = q[ith] + np.linspace(0.0, 2.0 * math.pi, beams, endpoint=False)
+        directions = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(beams)])
+        origins = np.tile([q[ix], q[iy], height], (beams, 1))
+        distance, _, _ = self.sim.raycaster.cast(origins, directions)
+        hit = np.isfinite(distance) & (distance <= float(self.robot.laser_range))
+        measured = distance[hit] + rng.normal(0.0, float(self.robot.laser_sigma), int(hit.sum()))
+        world = origins[hit] + directions[hit] * measured[:, None]
+        return (world - frame[:3, 3]) @ frame[:3, :3]
+
+    # -- motion ----------------------------------------------------------------------------
+    def _problem(self) -> Any:
+        from explore.motion.motion import MotionProblem
+
+        pvs, limit = self.pvs, self.occupied_from
+        if pvs is None:
+            return MotionProblem(self.robot)
+        # outside its grid the PVS answers 0.5 (free here): only robot parts near the grid are tested
+        return MotionProblem(self.robot, space_free=lambda points: pvs.probability(points) < limit,
+                             space_bounds=(pvs.min_corner, pvs.max_corner))
+
+    def move(self, target: Target, configs: list | None = None) -> Move | None:
+        """Go to ``target`` (IK unless ``configs`` from :meth:`reach` is given); None if impossible."""
+        if self.free_flyer:
+            return self._fly(target)
+        if configs is None:
+            reached = self.reach(target)
+            if reached is None:
+                self.failed_moves += 1
+                return None
+            target, configs = reached
+        sweep = np.atleast_2d(np.asarray(configs, dtype=float))
+        robot = self.robot
+        problem = self._problem()
+        self._recover(problem)
+        start = np.asarray(robot.q, dtype=float).copy()
+        t0 = time.perf_counter()
+        plan = self.planner.plan(problem, start, sweep[0], seed=int(self.rng.integers(2**31)))
+        planning_s = time.perf_counter() - t0
+        if plan is None:
+            self.failed_moves += 1
+            return None
+        start_pose = robot.fk(start)
+        collisions = self._drive(problem, plan)
+        true_start = robot.fk(robot.q)
+        believed = self.believed_pose()
+        true_target: Target = true_start
+        if isinstance(target, ScanPath) and len(sweep) > 1:
+            path = np.vstack([robot.q, sweep[1:] - sweep[0] + robot.q])
+            collisions += len(self._execute(path).collisions)
+            true_end = robot.fk(robot.q)
+            end = true_start.copy()
+            end[:3, 3] = true_end[:3, 3]
+            true_target = ScanPath(true_start, end, target.speed)
+        travel = float(np.linalg.norm(true_start[:3, 3] - start_pose[:3, 3]))
+        self.travel_m += travel
+        self.collisions += collisions
+        return Move(true_target, believed, travel, planning_s, collisions, getattr(plan, "planner", ""))
+
+    def _drive(self, problem: Any, plan: Any) -> int:
+        """Execute ``plan`` with noise; the number of collisions.
+
+        With the robot parameter ``replan_distance`` > 0 (a base that localises while it
+        drives, as a path-following controller would) the plan is executed in legs of that
+        much base travel; after each leg a short plan takes the robot back to where the leg
+        should have ended, and the next leg starts from there. Open loop, a drive of several
+        metres with sigma_omega = 0.28 rad/s ends decimetres off its path (Vasquez-Gomez
+        Sec. A6). A correction that cannot be planned is skipped (the leg goes on open loop).
+        """
+        leg_length = float(getattr(self.robot, "replan_distance", 0.0) or 0.0)
+        collisions = 0
+        while True:
+            leg, rest = (plan, None) if leg_length <= 0.0 or not self.base_dofs else \
+                _split_drive(self.robot, plan, self.base_dofs, leg_length)
+            execution = self._execute(leg)
+            collisions += len(execution.collisions)
+            if execution.collided or rest is None:
+                return collisions
+            correction = self._correction(problem, rest.path[0])
+            if correction is not None:
+                execution = self._execute(correction)
+                collisions += len(execution.collisions)
+                if execution.collided:
+                    return collisions
+            plan = rest
+
+    def _execute(self, plan: Any) -> Any:
+        """Execute a plan or path with noise against the true world; odometry and bumper stop."""
+        start = np.asarray(self.robot.q, dtype=float).copy()
+        execution = self.robot.execute(plan, self.rng, noise=self.noise, world="true")
+        self._odometry(start, execution)
+        self._back_off(execution)
+        return execution
+
+    def _correction(self, problem: Any, nominal: Array) -> Any:
+        """A plan from the robot's configuration to ``nominal`` (None: none needed or found)."""
+        here = np.asarray(self.robot.q, dtype=float).copy()
+        if np.linalg.norm(here[list(self.base_dofs)] - np.asarray(nominal)[list(self.base_dofs)]) < 0.01:
+            return None
+        return self.planner.plan(problem, here, np.asarray(nominal, dtype=float), seed=int(self.rng.integers(2**31)))
+
+    def _fly(self, target: Target) -> Move:
+        start = target_start(target)
+        travel = 0.0 if self._pose is None else float(np.linalg.norm(start[:3, 3] - self._pose[:3, 3]))
+        end = target.end if isinstance(target, ScanPath) else start
+        self._pose = np.asarray(end, dtype=float).copy()
+        if self.robot is not None:
+            q = self.robot.ik(self._pose)
+            if q is not None:
+                self.robot.q = q
+        self.travel_m += travel
+        return Move(target, start.copy(), travel, 0.0, 0, "straight_line")
+
+    def _recover(self, problem: Any, attempts: int = 3) -> None:
+        """If noise left the robot closer to an obstacle than its planning clearance (planning
+        would refuse to start), move to a nearby configuration that is valid again: back along
+        the last motion, else (a base) straight back or forward along its heading. Each try
+        is executed with noise, so it is repeated while the robot is still too close."""
+        for _ in range(attempts):
+            if problem.is_valid(self.robot.q):
+                return
+            goal = self._escape(problem)
+            if goal is None:
+                return
+            execution = self._execute(np.vstack([self.robot.q, goal]))
+            self.collisions += len(execution.collisions)
+
+    def _escape(self, problem: Any) -> Array | None:
+        """The latest valid configuration of the last motion, else (a base) the nearest base
+        shift along the heading (2-20 cm) that is valid, with twice the clearance if it can."""
+        for candidate in [] if self._last_path is None else self._last_path[::-1]:
+            if problem.is_valid(candidate):
+                return candidate
+        if not self.base_dofs:
+            return None
+        q = np.asarray(self.robot.q, dtype=float)
+        ix, iy, ith = self.base_dofs
+        axis = np.array([math.cos(q[ith]), math.sin(q[ith])])
+        shifts = []
+        for step in (0.02, 0.05, 0.1, 0.2):
+            for sign in (-1.0, 1.0):
+                shifted = q.copy()
+                shifted[[ix, iy]] += sign * step * axis
+                shifts.append(shifted)
+        for margin in (2.0 * problem.margin, problem.margin):
+            for candidate in shifts:
+                if problem.is_valid(candidate, margin=margin):
+                    return candidate
+        return None
+
+    def _accumulate(self, execution: Any) -> None:
+        """Grow the odometry variance by a motion's control noise (the robot plugin's sigmas):
+        per step (sigma dt)^2 in speed and turn rate; the heading error also moves the base
+        sideways over the distance driven."""
+        if not self.base_dofs or not self.noise or len(execution.controls) == 0:
+            return
+        dt = float(getattr(self.robot, "dt", 0.05))
+        steps = len(execution.controls)
+        sigma = np.asarray(execution.sigma, dtype=float)
+        rot_var = float((sigma[self.robot.n_base_controls - 1] * dt) ** 2 * steps)
+        trans_var = float((sigma[0] * dt) ** 2 * steps)
+        ix, iy, _ = self.base_dofs
+        driven = float(np.sum(np.linalg.norm(np.diff(execution.configs[:, [ix, iy]], axis=0), axis=1)))
+        self._odometry_var += [trans_var + driven**2 * (self._odometry_var[1] + rot_var), rot_var]
+
+    def odometry_sigmas(self) -> Array | None:
+        """Sigmas (gtsam Pose3 order: rotation, translation) of the motion since the last call; resets."""
+        if not self.base_dofs or not self.noise:
+            return None
+        trans, rot = np.sqrt(np.maximum(self._odometry_var, 1e-12))
+        self._odometry_var = np.zeros(2)
+        return np.array([rot] * 3 + [trans] * 3)
+
+    def _back_off(self, execution: Any) -> None:
+        """After a contact the robot stops at its last configuration before it (a bumper stop),
+        so that it can plan its way out; the belief moves back with it."""
+        if not execution.collided or len(execution.configs) < 2:
+            return
+        last = np.asarray(execution.configs[-2], dtype=float)
+        step = last - np.asarray(execution.configs[-1], dtype=float)
+        self.robot.q = last
+        self.robot.set_config(last)
+        if self.believed_q is not None:
+            self.believed_q = self.believed_q + step
+
+    def _odometry(self, start: Array, execution: Any) -> None:
+        """Advance the believed configuration by the nominal motion of the executed controls."""
+        self._last_path = np.asarray(execution.configs, dtype=float)
+        self._accumulate(execution)
+        final = np.asarray(execution.final, dtype=float)
+        believed = final.copy()
+        if self.base_dofs and self.believed_q is not None:
+            nominal, _, _ = self.robot.rollout(start, execution.controls, None, noise=False)
+            ix, iy, ith = self.base_dofs
+            step = invert(_planar(start[ix], start[iy], start[ith])) @ _planar(*nominal[-1][[ix, iy, ith]])
+            moved = _planar(*self.believed_q[[ix, iy, ith]]) @ step
+            believed[[ix, iy, ith]] = _planar_params(moved)
+        self.believed_q = believed

@@ -1,0 +1,122 @@
+"""Loading triangle meshes (OBJ with polygons, STL, PLY) as plain vertex/triangle arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from explore.core.typed import Points3, Pose
+
+
+@dataclass(frozen=True)
+class TriMesh:
+    """A triangle mesh: vertices (n, 3) float64 and triangles (m, 3) int32."""
+
+    vertices: Points3
+    triangles: np.ndarray
+
+    def transformed(self, pose: Pose, scale: np.ndarray | float = 1.0) -> TriMesh:
+        scaled = self.vertices * np.asarray(scale, dtype=float)
+        return TriMesh(scaled @ pose[:3, :3].T + pose[:3, 3], self.triangles)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    def to_open3d(self):  # -> open3d.geometry.TriangleMesh
+        import open3d as o3d
+
+        mesh = o3d.geometry.TriangleMesh(
+            o3d.utility.Vector3dVector(self.vertices), o3d.utility.Vector3iVector(self.triangles)
+        )
+        mesh.compute_vertex_normals()
+        return mesh
+
+    def area(self) -> float:
+        a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
+        return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+    @staticmethod
+    def concatenate(meshes: list[TriMesh]) -> TriMesh:
+        vertices, triangles, offset = [], [], 0
+        for mesh in meshes:
+            vertices.append(mesh.vertices)
+            triangles.append(mesh.triangles + offset)
+            offset += len(mesh.vertices)
+        if not vertices:
+            return TriMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32))
+        return TriMesh(np.vstack(vertices), np.vstack(triangles).astype(np.int32))
+
+
+def box_mesh(size: np.ndarray) -> TriMesh:
+    """Axis-aligned box centred at the origin with full extents ``size``."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_box(*size)
+    vertices = np.asarray(mesh.vertices) - np.asarray(size) / 2.0
+    return TriMesh(vertices, np.asarray(mesh.triangles, dtype=np.int32))
+
+
+def cylinder_mesh(radius: float, length: float, resolution: int = 48) -> TriMesh:
+    """Closed cylinder along z centred at the origin."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_cylinder(radius, length, resolution)
+    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int32))
+
+
+def sphere_mesh(radius: float, resolution: int = 24) -> TriMesh:
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius, resolution)
+    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int32))
+
+
+def read_obj(path: Path) -> TriMesh:
+    """Read an OBJ file, fan-triangulating polygons (Open3D drops quads)."""
+    vertices: list[list[float]] = []
+    triangles: list[list[int]] = []
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        for number, line in enumerate(handle, 1):
+            try:
+                if line.startswith("v "):
+                    vertices.append([float(x) for x in line.split()[1:4]])
+                    if len(vertices[-1]) != 3:
+                        raise ValueError("a vertex needs x, y, z")
+                elif line.startswith("f "):
+                    refs = [int(token.split("/")[0]) for token in line.split()[1:]]
+            except ValueError as error:
+                raise ValueError(f"{path.name} line {number}: {error}") from None
+            if line.startswith("f "):
+                idx = [r - 1 if r > 0 else len(vertices) + r for r in refs]
+                triangles.extend([idx[0], idx[i], idx[i + 1]] for i in range(1, len(idx) - 1))
+    if not vertices or not triangles:
+        raise ValueError(f"{path}: no triangles")
+    return _checked(TriMesh(np.asarray(vertices, dtype=float), np.asarray(triangles, dtype=np.int64)), path)
+
+
+def _checked(mesh: TriMesh, path: Path) -> TriMesh:
+    """A mesh whose vertices are finite and whose faces index existing vertices, else ValueError."""
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise ValueError(f"{path.name}: a vertex is not a finite number")
+    if mesh.triangles.size and (mesh.triangles.min() < 0 or mesh.triangles.max() >= len(mesh.vertices)):
+        raise ValueError(f"{path.name}: a face refers to a vertex that does not exist")
+    return TriMesh(mesh.vertices, mesh.triangles.astype(np.int32))
+
+
+def read_mesh(path: str | Path) -> TriMesh:
+    """Read OBJ, STL or PLY into a :class:`TriMesh`."""
+    path = Path(path)
+    if path.suffix.lower() == ".obj":
+        return read_obj(path)
+    import open3d as o3d
+
+    from explore.core.native_output import captured_output
+
+    with captured_output():  # Open3D's "[Open3D WARNING] Read ... failed" would come before our one line
+        mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise ValueError(f"{path.name}: no triangles (not a readable mesh)")
+    return _checked(TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int64)), path)

@@ -1,0 +1,275 @@
+"""A world loaded into pybullet (DIRECT) with its ground truth for the simulated sensors.
+
+The :class:`Simulation` owns the pybullet client, the bodies and the ground-truth meshes.
+Sensors cast rays against the ground truth through :class:`RayCaster` (Open3D
+``RaycastingScene``); metrics read :attr:`Simulation.ground_truth`. Planners get only
+:meth:`Simulation.environment_ids` (the known static environment), never the objects.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from explore.core.errors import BadInput
+from explore.core.geometry import pose_from, rpy_deg_to_matrix
+from explore.core.native_output import captured_output
+from explore.core.typed import Array, Points3
+from explore.sim.bullet import body_visual_meshes, p
+from explore.sim.meshes import TriMesh, read_mesh
+from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
+
+CONTACT_GAP = 5e-4  # m between a body and the body it rests on
+
+
+@dataclass(frozen=True)
+class GroundTruthBody:
+    name: str
+    body_id: int
+    mesh: TriMesh  # world frame
+    is_object: bool
+    known: bool
+
+
+class RayCaster:
+    """Casts many rays at once against triangle meshes (Open3D ``RaycastingScene``)."""
+
+    def __init__(self, meshes: list[TriMesh], nthreads: int = 0) -> None:
+        import open3d as o3d
+
+        self._scene = o3d.t.geometry.RaycastingScene(nthreads=nthreads)
+        self._geometry_to_index: dict[int, int] = {}
+        for index, mesh in enumerate(meshes):
+            tmesh = o3d.t.geometry.TriangleMesh()
+            tmesh.vertex.positions = o3d.core.Tensor(mesh.vertices.astype(np.float32))
+            tmesh.triangle.indices = o3d.core.Tensor(mesh.triangles.astype(np.int32))
+            self._geometry_to_index[int(self._scene.add_triangles(tmesh))] = index
+        self._lookup = np.full(max(self._geometry_to_index, default=0) + 2, -1, dtype=np.int64)
+        for geometry_id, index in self._geometry_to_index.items():
+            self._lookup[geometry_id] = index
+
+    def cast(self, origins: Points3, directions: Points3) -> tuple[Array, np.ndarray, Points3]:
+        """Distance to the first hit (inf if none), index of the mesh hit (-1), hit normals."""
+        import open3d as o3d
+
+        rays = np.hstack([origins, directions]).astype(np.float32)
+        result = self._scene.cast_rays(o3d.core.Tensor(rays))
+        t_hit = result["t_hit"].numpy().astype(np.float64)
+        ids = result["geometry_ids"].numpy().astype(np.int64)
+        invalid = ids >= len(self._lookup)  # INVALID_ID for misses
+        index = np.where(invalid, -1, self._lookup[np.minimum(ids, len(self._lookup) - 1)])
+        normals = result["primitive_normals"].numpy().astype(np.float64)
+        return t_hit, index, normals
+
+
+class Simulation:
+    """A world in pybullet plus its ground truth. Create one per run; ``close()`` it."""
+
+    def __init__(self, spec: WorldSpec | str, registry: Any | None = None, seed: int = 0) -> None:
+        self.spec = spec if isinstance(spec, WorldSpec) else load_world_spec(spec)
+        self.seed = seed
+        self.client = p.connect(p.DIRECT)
+        p.setAdditionalSearchPath(str(pybullet_data_path()), physicsClientId=self.client)
+        self.bodies: list[GroundTruthBody] = []
+        try:
+            with captured_output(stdout=True):  # pybullet's b3Error / b3Warning and Open3D's warnings
+                for body in self.spec.environment:
+                    self._add(body, is_object=False)
+                for body in self.spec.objects:
+                    self._add(body, is_object=True)
+            self._check_region()
+        except BaseException:
+            self.close()
+            raise
+        self.raycaster = RayCaster([b.mesh for b in self.bodies])
+        self.sensor = None
+        self.robot = None
+        if registry is not None:
+            self.attach_plugins(registry)
+
+    # -- plugins -------------------------------------------------------------------------
+    def attach_plugins(
+        self,
+        registry: Any,
+        sensor: tuple[str, dict] | None = None,
+        robot: tuple[str, dict] | None = None,
+    ) -> None:
+        """Build the world's sensor and robot plugins (optionally overridden)."""
+        file = str(self.spec.path)
+        name, params = sensor or (self.spec.sensor.plugin, self.spec.sensor.params)
+        self.sensor = registry.create("sensor", name, params, file, "sensor")
+        name, params = robot or (self.spec.robot.plugin, self.spec.robot.params)
+        self.robot = registry.create("robot", name, params, file, "robot")
+        if hasattr(self.robot, "attach"):
+            self.robot.attach(self)
+
+    # -- bodies --------------------------------------------------------------------------
+    def _support_top(self, name: str) -> float:
+        for body in self.bodies:
+            if body.name == name:
+                return float(body.mesh.vertices[:, 2].max())
+        raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
+
+    def _add(self, body: BodySpec, is_object: bool) -> None:
+        kind = "objects" if is_object else "environment"
+        index = (self.spec.objects if is_object else self.spec.environment).index(body)
+        where = f"{kind}[{index}]"
+        rotation = rpy_deg_to_matrix(body.rpy_deg)
+        quat = p.getQuaternionFromEuler(np.deg2rad(body.rpy_deg).tolist())
+        is_file_body = body.shape == "file" and body.source.suffix.lower() in (".urdf", ".sdf")
+        if is_file_body:
+            body_id, mesh = self._add_urdf(body, quat, where)  # mesh at the origin, rotated
+        else:
+            mesh = self._primitive_or_mesh(body, where).transformed(pose_from(np.zeros(3), rotation))
+        lo, hi = mesh.bounds
+        center = 0.5 * (lo + hi)
+        position = body.position.copy()  # the centre of the body's bounding box
+        if body.on is not None:
+            position[2] = self._support_top(body.on) + CONTACT_GAP + (center[2] - lo[2])
+        if is_file_body:
+            p.resetBasePositionAndOrientation(
+                body_id, (position - center).tolist(), quat, physicsClientId=self.client
+            )
+            world_mesh = TriMesh.concatenate(body_visual_meshes(body_id, self.client))
+        else:
+            mesh = TriMesh(mesh.vertices - center, mesh.triangles)
+            body_id = self._create_mesh_body(mesh, body.color)
+            p.resetBasePositionAndOrientation(
+                body_id, position.tolist(), [0, 0, 0, 1], physicsClientId=self.client
+            )
+            world_mesh = TriMesh(mesh.vertices + position, mesh.triangles)
+        if not np.all(np.isfinite(world_mesh.vertices)):
+            raise BadInput(str(self.spec.path), where, "pose gives non-finite coordinates")
+        self.bodies.append(GroundTruthBody(body.name, body_id, world_mesh, is_object, body.known))
+
+    def _primitive_or_mesh(self, body: BodySpec, where: str) -> TriMesh:
+        from explore.sim.meshes import box_mesh, cylinder_mesh, sphere_mesh
+
+        if body.shape == "box":
+            mesh = box_mesh(body.dims)
+        elif body.shape == "cylinder":
+            mesh = cylinder_mesh(body.dims[0], body.dims[1])
+        elif body.shape == "sphere":
+            mesh = sphere_mesh(body.dims[0])
+        else:
+            try:
+                mesh = read_mesh(body.source)
+            except (OSError, ValueError) as error:
+                raise BadInput(str(self.spec.path), f"{where}.source", f"cannot read mesh: {error}") from None
+        scale = body.scale
+        if body.size is not None:
+            lo, hi = mesh.bounds
+            scale = np.full(3, body.size / float(np.max(hi - lo)))
+        return TriMesh(mesh.vertices * scale, mesh.triangles)
+
+    def _create_mesh_body(self, mesh: TriMesh, color: tuple[float, ...]) -> int:
+        vertices = mesh.vertices.tolist()
+        indices = mesh.triangles.reshape(-1).tolist()
+        collision = p.createCollisionShape(
+            p.GEOM_MESH, vertices=vertices, indices=indices,
+            flags=p.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=self.client,
+        )
+        visual = p.createVisualShape(
+            p.GEOM_MESH, vertices=vertices, indices=indices, rgbaColor=list(color),
+            physicsClientId=self.client,
+        )
+        return p.createMultiBody(0.0, collision, visual, physicsClientId=self.client)
+
+    def _add_urdf(self, body: BodySpec, quat: tuple, where: str) -> tuple[int, TriMesh]:
+        file = str(self.spec.path)
+        scale = float(body.scale[0])
+        if body.size is not None or not np.allclose(body.scale, body.scale[0]):
+            if body.size is None:
+                raise BadInput(file, f"{where}.scale", "URDF/SDF bodies take one uniform scale")
+        body_id = self._load_file(body, scale, where)
+        p.resetBasePositionAndOrientation(body_id, [0, 0, 0], quat, physicsClientId=self.client)
+        mesh = TriMesh.concatenate(body_visual_meshes(body_id, self.client))
+        if len(mesh.triangles) == 0:
+            raise BadInput(file, f"{where}.source", "the file has no visual geometry")
+        if body.size is not None:
+            lo, hi = mesh.bounds
+            factor = body.size / float(np.max(hi - lo))
+            p.removeBody(body_id, physicsClientId=self.client)
+            body_id = self._load_file(body, factor, where)
+            p.resetBasePositionAndOrientation(body_id, [0, 0, 0], quat, physicsClientId=self.client)
+            mesh = TriMesh.concatenate(body_visual_meshes(body_id, self.client))
+        return body_id, mesh
+
+    def _load_file(self, body: BodySpec, scale: float, where: str) -> int:
+        try:
+            if body.source.suffix.lower() == ".urdf":
+                return p.loadURDF(str(body.source), useFixedBase=True, globalScaling=scale, physicsClientId=self.client)
+            ids = p.loadSDF(str(body.source), globalScaling=scale, physicsClientId=self.client)
+            return ids[0]
+        except p.error as error:
+            raise BadInput(str(self.spec.path), f"{where}.source", f"pybullet cannot load it: {error}") from None
+
+    def _check_region(self) -> None:
+        tol = 1e-3
+        for index, body in enumerate(b for b in self.bodies if b.is_object):
+            lo, hi = body.mesh.bounds
+            if np.any(lo < self.spec.region_min - tol) or np.any(hi > self.spec.region_max + tol):
+                raise BadInput(
+                    str(self.spec.path),
+                    f"objects[{index}] ({body.name})",
+                    f"extends outside the region: object box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}, "
+                    f"region {self.spec.region_min.tolist()}..{self.spec.region_max.tolist()}",
+                )
+
+    # -- queries -------------------------------------------------------------------------
+    @property
+    def ground_truth(self) -> list[GroundTruthBody]:
+        """Ground-truth bodies; for metrics and simulated sensors only, never for planners."""
+        return self.bodies
+
+    def objects(self) -> list[GroundTruthBody]:
+        return [b for b in self.bodies if b.is_object]
+
+    def environment_ids(self) -> list[int]:
+        """pybullet ids of the known static environment (what a planner may know)."""
+        return [b.body_id for b in self.bodies if not b.is_object]
+
+    def object_ids(self) -> list[int]:
+        return [b.body_id for b in self.bodies if b.is_object]
+
+    def object_mesh(self, name: str | None = None) -> TriMesh:
+        """Ground-truth mesh of one object (or of all objects)."""
+        chosen = [b.mesh for b in self.objects() if name is None or b.name == name]
+        return TriMesh.concatenate(chosen)
+
+    def close(self) -> None:
+        if getattr(self, "client", None) is not None and p.isConnected(self.client):
+            p.disconnect(self.client)
+        self.client = None
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def describe(self) -> dict[str, Any]:
+        """A summary for ``explore worlds show``."""
+        rows = []
+        for body in self.bodies:
+            lo, hi = body.mesh.bounds
+            rows.append(
+                {
+                    "name": body.name,
+                    "role": ("object, known" if body.known else "object, unknown") if body.is_object else "environment",
+                    "size_m": np.round(hi - lo, 3).tolist(),
+                    "center_m": np.round(0.5 * (lo + hi), 3).tolist(),
+                    "triangles": int(len(body.mesh.triangles)),
+                }
+            )
+        return {
+            "name": self.spec.name,
+            "file": str(self.spec.path),
+            "description": self.spec.description,
+            "bodies": rows,
+            "robot": {"plugin": self.spec.robot.plugin, "params": self.spec.robot.params},
+            "sensor": {"plugin": self.spec.sensor.plugin, "params": self.spec.sensor.params},
+            "region": {"min": self.spec.region_min.tolist(), "max": self.spec.region_max.tolist()},
+        }
