@@ -25,7 +25,7 @@ STRATEGY = "ig_quality/bs_hr"
 
 
 def shipped_worlds() -> list[str]:
-    from explore.sim.world import list_worlds
+    from explore.sim import list_worlds
 
     return [p.stem for p in list_worlds()]
 

@@ -28,7 +28,7 @@ WORLD = "cluttered"
 
 def strategies() -> list[str]:
     """The registered Vasquez-Gomez strategies (DU first)."""
-    from explore.runtime.registry import Registry
+    from explore.runtime import Registry
 
     names = [n for n in Registry.load().names("strategy") if n.startswith("vasquez/")]
     return sorted(names, key=lambda n: (n != "vasquez/du", n))

@@ -47,7 +47,7 @@ def view_poses(sim: Any, count: int, rng: np.random.Generator) -> list[np.ndarra
     uniformly oriented views around a table are mostly out of an arm's reach, and each failed
     IK costs every restart.
     """
-    from explore.core.geometry import look_at
+    from explore.core import look_at
 
     base = sim.spec.robot.base
     poses = []
@@ -99,10 +99,10 @@ def _queries(sim: Any, problem: Any, count: int, rng: np.random.Generator,
 def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: tuple[str, ...] = (),
                  count: int | None = None) -> list[dict[str, Any]]:
     """One row per world x planner (queries shared by the planners of a world)."""
-    from explore.mapping.pvs import PVS
-    from explore.motion.motion import MotionProblem
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.mapping import PVS
+    from explore.motion import MotionProblem
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     rows = []
@@ -181,9 +181,9 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
     Every finished run is appended to ``runs_file`` (JSON lines) and found there again on a
     re-run with the same settings, so a long grid can be stopped and resumed.
     """
-    from explore.nbv.nbvs import NBVSSession
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.nbv import NBVSSession
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     seed_list = range(seeds or (10 if full else 5))
@@ -298,7 +298,7 @@ def main(argv: list[str] | None = None) -> int:
         rows += planner_rows(args.full, log, worlds,
                              tuple(p for p in args.planners.split(",") if p), args.queries)
     if args.part in ("all", "nbvs"):
-        from explore.motion.planning_clock import work_clock
+        from explore.motion import work_clock
 
         with work_clock():  # the runs' limits in work done: the same seed gives the same row under any load
             rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,

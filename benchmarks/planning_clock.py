@@ -33,10 +33,10 @@ def samples(count: int, log: Any) -> list[dict[str, Any]]:
     from planners import _queries
 
     from explore import planning_clock
-    from explore.mapping.pvs import PVS
-    from explore.motion.motion import MotionProblem
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.mapping import PVS
+    from explore.motion import MotionProblem
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     out = []
@@ -76,7 +76,7 @@ def fit(records: list[dict[str, Any]], kinds: list[str]) -> dict[str, float]:
 
 
 def main() -> None:
-    from explore.motion.planning_clock import COSTS
+    from explore.motion import COSTS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--queries", type=int, default=8, help="query pairs per world")

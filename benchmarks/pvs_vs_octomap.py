@@ -35,11 +35,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from explore.mapping.pvs import PVS
-from explore.runtime.registry import Registry
-from explore.sim.acquire import target_for
-from explore.sim.scan import Scan
-from explore.sim.simulation import Simulation
+from explore.mapping import PVS
+from explore.runtime import Registry
+from explore.sim import Scan, Simulation, target_for
 
 SCENES = (
     # world, distance of the views (m), resolutions

@@ -89,7 +89,7 @@ def utility_overrides(registry, strategy: str, variant: str | None, normalise: s
 
 def warm_up() -> None:
     """Compile (or load) the numba kernels once, so no selection time includes compilation."""
-    from explore.mapping.visibility import TraceSettings, VoxelGrid, first_blocked, trace
+    from explore.mapping import TraceSettings, VoxelGrid, first_blocked, trace
 
     grid = VoxelGrid(np.full((4, 4, 4), 0.5, dtype=np.float32), np.zeros(3), 0.01)
     origins = np.tile([[-0.05, 0.02, 0.02]], (2, 1))
@@ -107,9 +107,9 @@ def run_one(job: tuple) -> dict:
         import numba
 
         numba.set_num_threads(threads)
-    from explore.nbv.modelling import ModellingSession
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     warm_up()
@@ -222,9 +222,9 @@ def save_png(rows: list[dict], path: str, max_scans: int) -> None:
 
 def speed(repeat: int, world: str) -> int:
     """Selection time per candidate count, uniform vs HRT, at the state after 5 scans."""
-    from explore.nbv.modelling import ModellingSession
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     warm_up()
@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from explore_plugins.strategies import IROS, TABLE_4_5
 
-    from explore.runtime.registry import Registry
+    from explore.runtime import Registry
 
     registry = Registry.load()
     worlds = [w for w in args.worlds.split(",") if w]

@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from explore.runtime.rundiff import comparable, differences, load_run
+from explore.runtime import comparable, differences, load_run
 
 EXPLORE = Path(sys.executable).parent / "explore"
 SMALL_NBVS = ["--set", "start_nbvs.n_samples=800", "--set", "start_nbvs.top=6"]

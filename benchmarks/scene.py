@@ -59,9 +59,9 @@ def _round(row: dict[str, Any]) -> dict[str, Any]:
 
 # -- part 1: the scene ------------------------------------------------------------------------
 def part_scene(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
-    from explore.perception.database import ObjectDatabase
-    from explore.scene.session import SceneSession
-    from explore.sim.simulation import Simulation
+    from explore.perception import ObjectDatabase
+    from explore.scene import SceneSession
+    from explore.sim import Simulation
 
     rows = []
     db_path = Path(tempfile.mkdtemp(prefix="explore-scene-")) / "objects.db"
@@ -103,12 +103,10 @@ def _views(rng: np.random.Generator, count: int) -> list[tuple[np.ndarray, np.nd
 
 
 def part_recognition(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
-    from explore.core.geometry import look_at
-    from explore.mapping.pvs import PVS
-    from explore.perception.database import object_frame
-    from explore.perception.recognition import Model
-    from explore.perception.validation import pvs_votes
-    from explore.sim.simulation import Simulation
+    from explore.core import look_at
+    from explore.mapping import PVS
+    from explore.perception import Model, object_frame, pvs_votes
+    from explore.sim import Simulation
 
     segmenter = registry.create("segmenter", "plane_clusters", {"scale": "table"})
     methods = {m: registry.create("recognizer", m) for m in ("ppf", "fpfh_ransac", "vfh_mean_distance")}
@@ -176,11 +174,10 @@ def part_recognition(args: argparse.Namespace, registry: Any) -> list[dict[str, 
 
 # -- part 3: multi-view fusion ------------------------------------------------------------------
 def part_fusion(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
-    from explore.perception.database import ObjectDatabase
-    from explore.perception.registration import fuse_poses
-    from explore.scene.metrics import model_truth
-    from explore.scene.session import SceneSession
-    from explore.sim.simulation import Simulation
+    from explore.core import pose_error
+    from explore.perception import ObjectDatabase, fuse_poses
+    from explore.scene import SceneSession, model_truth
+    from explore.sim import Simulation
 
     rows = []
     for seed in range(args.seeds):
@@ -206,10 +203,9 @@ def part_fusion(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]
                     if found is not None:
                         hypotheses.append(found)
                     if hypotheses:
-                        from explore.perception.recognition import pose_error
-
                         fused = fuse_poses([h.pose for h in hypotheses], [h.q_h for h in hypotheses])
                         t_err, r_err = pose_error(fused.pose, truth)
+                        r_err = math.degrees(r_err)
                         rows.append(_round({"part": "fusion", "seed": seed, "object": model,
                                             "views": taken, "hypotheses": len(hypotheses),
                                             "members": len(fused.members), "error_mm": 1e3 * t_err,
@@ -221,20 +217,17 @@ def part_fusion(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]
 # -- part 4: pose graph of a noisy mobile base ---------------------------------------------------
 def _free_share(pvs: Any, sim: Any) -> float:
     """Share of the objects' true surface samples that the PVS calls free (p < 0.25): wrong poses smear it."""
-    from explore.mapping.metrics import sample_surface
+    from explore.mapping import sample_surface
 
     points = np.vstack([sample_surface(b.mesh, 2e-5, seed=0)[0] for b in sim.objects()])
     return float(np.mean(pvs.probability(points) < 0.25))
 
 
 def part_pose_graph(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
-    from explore.mapping.pvs import PVS
-    from explore.perception.database import ObjectDatabase
-    from explore.perception.registration import rebase_scan
-    from explore.scene.metrics import pose_graph_errors
-    from explore.scene.patrol import known_tables, surround
-    from explore.scene.session import SceneSession
-    from explore.sim.simulation import Simulation
+    from explore.mapping import PVS
+    from explore.perception import ObjectDatabase, rebase_scan
+    from explore.scene import SceneSession, known_tables, pose_graph_errors, surround
+    from explore.sim import Simulation
 
     rows = []
     for world in args.graph_worlds:
@@ -269,9 +262,9 @@ def part_pose_graph(args: argparse.Namespace, registry: Any) -> list[dict[str, A
 
 # -- part 5: the robots ----------------------------------------------------------------------------
 def part_robots(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
-    from explore.perception.database import ObjectDatabase
-    from explore.scene.session import SceneSession
-    from explore.sim.simulation import Simulation
+    from explore.perception import ObjectDatabase
+    from explore.scene import SceneSession
+    from explore.sim import Simulation
 
     rows = []
     for world in ("workcell", "scene_small_mm", "scene_small_mobile"):
@@ -320,8 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")
     args = parser.parse_args(argv)
-    from explore.motion.planning_clock import work_clock
-    from explore.runtime.registry import Registry
+    from explore.motion import work_clock
+    from explore.runtime import Registry
 
     registry = Registry.load()
     parts = args.part or ["scene", "recognition", "fusion", "pose_graph"]

@@ -15,9 +15,8 @@ import time
 
 import numpy as np
 
-from explore.runtime.registry import Registry
-from explore.sim.acquire import target_for
-from explore.sim.simulation import Simulation
+from explore.runtime import Registry
+from explore.sim import Simulation, target_for
 
 
 def _best(fn, repeats: int) -> float:

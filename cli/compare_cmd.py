@@ -13,9 +13,7 @@ from typing import Annotated, Any
 
 import typer
 
-from explore.core.errors import BadInput, Terminated
-from explore.core.outcomes import FINISHED
-from explore.core.output_paths import check_output
+from explore.core import FINISHED, BadInput, Terminated, check_output
 
 
 def _names(text: str | None, option: str, allow_empty: bool = True) -> list[str | None]:
@@ -52,10 +50,8 @@ def build_grid(
     threads: int,
 ) -> tuple[Any, Any]:
     """Validate every argument against the registry and the search paths; return (grid, registry)."""
-    from explore.runtime.compare import Grid, make_registry
-    from explore.runtime.run import RunConfig, check_inputs
-    from explore.runtime.trees import find_tree, load_tree
-    from explore.sim.world import find_world, load_world_spec
+    from explore.runtime import Grid, RunConfig, check_inputs, find_tree, load_tree, make_registry
+    from explore.sim import find_world, load_world_spec
 
     if not tree:
         raise BadInput("--tree", None, "missing (a tree name or file, see `explore tree list`)")
@@ -138,8 +134,7 @@ def register(app: typer.Typer) -> None:
         ] = None,
     ) -> int:
         """Run a grid of runs (resumable) and write results.csv, summary.md, plots and report.html."""
-        from explore.runtime.compare import RESULTS_FILE, compare, read_results
-        from explore.runtime.report import write_report
+        from explore.runtime import RESULTS_FILE, compare, read_results, write_report
 
         from .main import console
 

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from explore.core.errors import BadInput
+from explore.core import BadInput
 
 DbOption = Annotated[
     Path | None,
@@ -18,7 +18,7 @@ DbOption = Annotated[
 
 
 def _open(db: Path | None, create: bool = False, readonly: bool = False):  # -> ObjectDatabase
-    from explore.perception.database import ObjectDatabase, default_path
+    from explore.perception import ObjectDatabase, default_path
 
     return ObjectDatabase.open(db or default_path(), create=create, readonly=readonly)
 
@@ -70,7 +70,7 @@ def register(app: typer.Typer) -> None:
         """Add an object from a mesh file (creates the database if needed)."""
         import math
 
-        from explore.sim.meshes import TriMesh, read_mesh
+        from explore.sim import TriMesh, read_mesh
 
         from .main import console
 
@@ -89,7 +89,7 @@ def register(app: typer.Typer) -> None:
                 raise BadInput(str(database.path), name,
                                "an object of this name exists (use --replace to overwrite it)")
             if descriptors and len(loaded.triangles):
-                from explore.perception.recognition import Model, model_descriptors
+                from explore.perception import Model, model_descriptors
 
                 console.print(f"computing descriptors of {name} ...")
                 stored = model_descriptors(Model(name, loaded))
@@ -114,7 +114,7 @@ def register(app: typer.Typer) -> None:
         db: DbOption = None,
     ) -> None:
         """Write an object's mesh to a file."""
-        from explore.core.output_paths import check_output
+        from explore.core import check_output
 
         from .main import console
 

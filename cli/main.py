@@ -15,11 +15,7 @@ import typer
 from rich.console import Console
 
 from explore import __version__
-from explore.core.determinism import THREAD_VARIABLES
-from explore.core.errors import MAX_LINE, BadInput, MissionFailed, Terminated
-
-for _name in THREAD_VARIABLES:  # one BLAS thread: sums that do not depend on the thread count (NumPy not loaded yet)
-    os.environ.setdefault(_name, "1")
+from explore.core import MAX_LINE, BadInput, MissionFailed, Terminated
 
 app = typer.Typer(
     name="explore",
@@ -130,7 +126,7 @@ def run() -> None:
 
 def registry():
     """A registry for this CLI invocation (plugins may be blocked with EXPLORE_BLOCK_PLUGINS)."""
-    from explore.runtime.registry import Registry
+    from explore.runtime import Registry
 
     blocked = [b for b in os.environ.get("EXPLORE_BLOCK_PLUGINS", "").split(",") if b]
     return Registry.load(blocked=blocked)

@@ -7,8 +7,8 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from explore.core.errors import BadInput
-from explore.runtime.registry import KINDS
+from explore.core import BadInput
+from explore.runtime import KINDS
 
 
 def register(app: typer.Typer) -> None:

@@ -74,9 +74,8 @@ def register(app: typer.Typer) -> None:
         """Run an exploration tree on a world; exit 0 on success, 1 if the mission failed."""
         from rich.live import Live
 
-        from explore.core.errors import Terminated
-        from explore.core.outcomes import STYLE, SUCCESS
-        from explore.runtime.run import RunConfig, default_out_dir, execute
+        from explore.core import STYLE, SUCCESS, Terminated
+        from explore.runtime import RunConfig, default_out_dir, execute
 
         from .main import console, registry
 

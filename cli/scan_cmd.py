@@ -9,12 +9,11 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from explore.core.errors import BadInput
-from explore.core.output_paths import check_output
+from explore.core import BadInput, check_output
 
 
 def _vector(text: str, option: str) -> np.ndarray:
-    from explore.core.geometry import parse_vector
+    from explore.core import parse_vector
 
     try:
         return parse_vector(text)
@@ -40,10 +39,8 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int, typer.Option("--seed", min=0, help="Noise seed.")] = 0,
     ) -> None:
         """Simulate one scan of a world and write the measured points."""
-        from explore.core.params import parse_assignment
-        from explore.core.pictures import save_points_png
-        from explore.sim.acquire import target_for
-        from explore.sim.simulation import Simulation
+        from explore.core import parse_assignment, save_points_png
+        from explore.sim import Simulation, target_for
 
         from .main import console, out_path, registry
 

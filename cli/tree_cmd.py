@@ -7,12 +7,11 @@ from typing import Annotated
 
 import typer
 
-from explore.core.errors import BadInput
-from explore.core.output_paths import check_output
+from explore.core import BadInput, check_output
 
 
 def _load(tree: str):
-    from explore.runtime.trees import load_tree
+    from explore.runtime import load_tree
 
     from .main import registry
 
@@ -42,8 +41,7 @@ def register(app: typer.Typer) -> None:
         """Print the tree (unicode), or write it as Graphviz dot or PNG."""
         import py_trees
 
-        from explore.runtime.outputs import tree_dot, write_tree_diagram
-        from explore.runtime.trees import build
+        from explore.runtime import build, tree_dot, write_tree_diagram
 
         from .main import console
 
@@ -70,7 +68,7 @@ def register(app: typer.Typer) -> None:
     @sub.command("list")
     def list_() -> None:
         """List the tree files in ./trees, the shipped trees and $EXPLORE_TREES."""
-        from explore.runtime.trees import list_trees
+        from explore.runtime import list_trees
 
         from .main import console
 

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from explore.core.errors import BadInput
+from explore.core import BadInput
 
 
 def register(app: typer.Typer) -> None:
@@ -16,8 +16,8 @@ def register(app: typer.Typer) -> None:
     @sub.command("list")
     def list_worlds() -> None:
         """List the world files in the search path (./worlds, the shipped worlds, $EXPLORE_WORLDS)."""
-        from explore.sim.world import list_worlds as find
-        from explore.sim.world import load_world_spec
+        from explore.sim import list_worlds as find
+        from explore.sim import load_world_spec
 
         from .main import console
 
@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
     @sub.command("show")
     def show(world: Annotated[str, typer.Argument(help="World name or file.")]) -> None:
         """Print objects (with sizes), robot, sensor and region of a world."""
-        from explore.sim.simulation import Simulation
+        from explore.sim import Simulation
 
         from .main import console, registry
 

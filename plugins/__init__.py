@@ -11,7 +11,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
-from explore.runtime.hookspecs import hookimpl
+from explore.runtime import hookimpl
 
 BUILTIN_MODULES = (
     "sensors",

@@ -13,10 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.outcomes import NO_CANDIDATES
-from explore.core.params import Param
-from explore.nbv.candidates import STOP, Decision
-from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
+from explore.core import NO_CANDIDATES, Param
+from explore.nbv import STOP, Decision
+from explore.runtime import ExploreBehaviour, Outcome, failure, success
 
 
 class StartModelling(ExploreBehaviour):
@@ -38,8 +37,8 @@ class StartModelling(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.nbv.modelling import ModellingSession
-        from explore.runtime.outputs import ModellingOutputs
+        from explore.nbv import ModellingSession
+        from explore.runtime import ModellingOutputs
 
         ctx = self.context
         config = ctx.config

@@ -17,10 +17,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from explore.core.errors import BadInput
-from explore.core.native_output import captured_output
-from explore.core.params import Param
-from explore.runtime.compare import OnDone, RunSpec, run_isolated, run_local
+from explore.core import BadInput, Param, captured_output
+from explore.runtime import OnDone, RunSpec, run_isolated, run_local
 
 
 def _cores() -> int:

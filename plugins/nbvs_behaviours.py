@@ -17,9 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.params import Param
-from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
-from explore.runtime.outputs import object_result
+from explore.core import Param
+from explore.runtime import ExploreBehaviour, Outcome, failure, object_result, success
 
 
 class TreeNBVS:
@@ -100,7 +99,7 @@ class TreeNBVS:
         return self.session.acquire(pose)
 
     def integrate(self, scan: Any) -> Any:
-        from explore.nbv.nbvs import ViewRecord
+        from explore.nbv import ViewRecord
 
         record = self._pending or ViewRecord(0, {}, 0.0, 0.0, float("nan"), None, 1.0, 0.0, 0, False, [])
         self._pending = None
@@ -122,7 +121,7 @@ class TreeNBVS:
 
     def run_outputs(self, out_dir: Any) -> dict[str, Any]:
         """PVS, measured points, coverage and trajectory pictures; the NBVS metrics."""
-        from explore.core.pictures import save_curves_png, save_points_png
+        from explore.core import save_curves_png, save_points_png
 
         out_dir = Path(out_dir)
         s = self.session
@@ -205,7 +204,7 @@ class StartNBVS(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.nbv.nbvs import NBVSSession
+        from explore.nbv import NBVSSession
 
         ctx = self.context
         config = ctx.config

@@ -17,11 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.params import Param
-from explore.motion.motion import MotionPlan, MotionProblem
-from explore.nbv.candidates import Candidate, PlanningContext
-from explore.nbv.nbvs import ObstacleField, StateSamples, expected_utility
-from explore.sim.scan import ScanPath
+from explore.core import Param
+from explore.motion import MotionPlan, MotionProblem
+from explore.nbv import Candidate, ObstacleField, PlanningContext, StateSamples, expected_utility
+from explore.sim import ScanPath
 
 
 class ExpectedUtility:
@@ -44,7 +43,7 @@ class ExpectedUtility:
     def base_utility(self) -> Any:
         """The wrapped utility plugin (built on first use from the default registry)."""
         if self._base is None:
-            from explore.runtime.registry import Registry
+            from explore.runtime import Registry
 
             self._base = Registry.load().create("utility", self.base, {}, "<expected_utility>")
         return self._base

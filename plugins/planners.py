@@ -12,10 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.errors import BadInput
-from explore.core.params import Param
-from explore.core.typed import Array
-from explore.motion.motion import (
+from explore.core import Array, BadInput, Param
+from explore.motion import (
     OPTIONAL_GEOMETRIC,
     MotionPlan,
     MotionProblem,

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from explore.core.params import Param
-from explore.core.typed import Points3, Pose
-from explore.perception.validation import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
+from explore.core import Param, Points3, Pose
+from explore.perception import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
 
 
 class PvsVotes:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from explore.core.params import Param
-from explore.perception.recognition import Q_H_MIN, FPFHRansacRecognizer, PPFRecognizer, VFHRecognizer
+from explore.core import Param
+from explore.perception import Q_H_MIN, FPFHRansacRecognizer, PPFRecognizer, VFHRecognizer
 
 _VERIFY = (
     Param("match_threshold", float, 0.005, "m", "render-and-compare depth tolerance (Eq. 3.10; also 3 sigma)",

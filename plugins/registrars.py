@@ -6,9 +6,8 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from explore.core.params import Param
-from explore.core.typed import Points3, Pose
-from explore.perception.registration import (
+from explore.core import Param, Points3, Pose
+from explore.perception import (
     IcpResult,
     IncrementalPoseGraph,
     PoseGraphResult,
@@ -17,7 +16,7 @@ from explore.perception.registration import (
     pose_graph_from_scans,
     sigmas6,
 )
-from explore.sim.scan import Scan
+from explore.sim import Scan
 
 
 class _Configured:

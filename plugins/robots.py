@@ -20,23 +20,22 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from explore.core.params import Param
-from explore.core.typed import Array, Points3, Pose
-from explore.motion.motion import (
+from explore.core import Array, Param, Points3, Pose, pose_error, wrap_angle
+from explore.motion import (
     BulletCollider,
     CollisionEvent,
     Execution,
     MotionPlan,
     Part,
+    Robot,
     self_collision_pairs,
     truncated_normal,
     truncated_normal_logpdf,
 )
-from explore.motion.robot import Robot
-from explore.sim.bullet import frame_pose, p
+from explore.sim import frame_pose, p
 
 if TYPE_CHECKING:
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
 IK_POSITION_TOL = 1e-3  # m, FK/IK round trip
 IK_ANGLE_TOL = math.radians(0.5)
@@ -54,11 +53,6 @@ def _planar(x: float, y: float, theta: float, z: float = 0.0) -> Pose:
     pose[:3, :3] = _rot_z(theta)
     pose[:3, 3] = (x, y, z)
     return pose
-
-
-def _wrap(angle: float) -> float:
-    """Angle in [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _pose6(values: list[float]) -> Pose:
@@ -97,13 +91,6 @@ def _rotvec(m: Array) -> Array:
     if sin2 < 1e-12:
         return 0.5 * w
     return w * (math.atan2(0.5 * sin2, cos) / sin2)
-
-
-def pose_error(a: Pose, b: Pose) -> tuple[float, float]:
-    """Position (m) and rotation angle (rad) between two poses."""
-    r = a[:3, :3].T @ b[:3, :3]
-    angle = math.acos(float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
-    return float(np.linalg.norm(a[:3, 3] - b[:3, 3])), angle
 
 
 def _surface_samples(vertices: Array, triangles: np.ndarray, spacing: float) -> Points3:
@@ -186,7 +173,7 @@ class _BulletRobot(Robot):
 
     def _part_point_sets(self, spacing: float) -> list[tuple[Part, Points3]]:
         """(part, points in its link frame) on every part's visual geometry and extra meshes."""
-        from explore.sim.meshes import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
+        from explore.sim import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 
         sets = []
         for part in self.parts:
@@ -359,7 +346,7 @@ class _BulletRobot(Robot):
             heading = math.atan2(d[1], d[0])
             mid = 0.5 * (a[th] + b[th])
             # drive forwards or backwards, at the driving heading's unwrapped value nearest the turns' middle
-            options = [mid + _wrap(o - mid) for o in (heading, heading + math.pi)]
+            options = [mid + wrap_angle(o - mid) for o in (heading, heading + math.pi)]
             h = min(options, key=lambda o: abs(o - a[th]) + abs(b[th] - o))
             pieces = np.array([abs(h - a[th]) / self.base_turn_speed, drive / self.base_speed,
                                abs(b[th] - h) / self.base_turn_speed])
@@ -532,7 +519,7 @@ class _BulletRobot(Robot):
         size = np.asarray(self.sensor_size, dtype=float)
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=(size / 2).tolist(), physicsClientId=self.client)
         body = p.createMultiBody(0.0, shape, -1, physicsClientId=self.client)
-        from explore.sim.meshes import box_mesh
+        from explore.sim import box_mesh
 
         mesh = box_mesh(size)
         return body, mesh
@@ -809,7 +796,7 @@ class MobileManipulator(_BulletRobot):
         self.chain = _ArmChain(self, self.urdf, self.flange_link, _planar(x, y, math.radians(yaw)) @ self.base_T_arm)
         self.dof = 3 + len(self.chain.joints)
         self.base_body = self._box_body(size)
-        from explore.sim.meshes import box_mesh
+        from explore.sim import box_mesh
 
         self.flange_T_sensor = _pose6(self.mount)
         self._housing, housing_mesh = self._sensor_housing()
@@ -958,7 +945,7 @@ class MobileBase(_BulletRobot):
 
     def attach(self, sim: Simulation) -> None:
         super().attach(sim)
-        from explore.sim.meshes import box_mesh, cylinder_mesh, sphere_mesh
+        from explore.sim import box_mesh, cylinder_mesh, sphere_mesh
 
         size = np.asarray(self.base_size, dtype=float)
         mast_len = self.camera_height - self.ground_clearance - size[2] - 0.08
@@ -1035,7 +1022,7 @@ class MobileBase(_BulletRobot):
                 pan = 0.0
             theta = yaw - pan
             if seed is not None:  # keep theta continuous with the seed
-                theta = seed[2] + ((theta - seed[2] + math.pi) % (2 * math.pi) - math.pi)
+                theta = seed[2] + wrap_angle(theta - seed[2])
             xy = world_T_sensor[:2, 3] - _rot_z(theta)[:2, 0] * self.mast_offset
             q = np.array([xy[0], xy[1], theta] + ([pan, tilt] if self.pan_tilt else []))
             dp, da = pose_error(self.fk(q), world_T_sensor)
@@ -1095,7 +1082,7 @@ class FreeFlyer(_BulletRobot):
             part = Part(self.body, -1, "sensor")
             self.parts = [part]
             self.collider = BulletCollider(sim.client, self.parts)
-            from explore.sim.meshes import sphere_mesh
+            from explore.sim import sphere_mesh
 
             self._part_meshes = {part: [sphere_mesh(self.radius)]}
             self._sample_part_points()

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.params import Param
-from explore.perception.recognition import Q_H_MIN
-from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
+from explore.core import Param
+from explore.perception import Q_H_MIN
+from explore.runtime import ExploreBehaviour, Outcome, failure, success
 
 
 class SceneRun:
@@ -136,8 +136,8 @@ class StartScene(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.perception.database import ObjectDatabase, default_path
-        from explore.scene.session import SceneSession
+        from explore.perception import ObjectDatabase, default_path
+        from explore.scene import SceneSession
 
         ctx, p = self.context, self.p
         config = ctx.config
@@ -390,7 +390,7 @@ class SurroundTable(ExploreBehaviour):
     def work(self) -> Outcome:
         import math
 
-        from explore.scene.patrol import known_tables, surround
+        from explore.scene import known_tables, surround
 
         run = self.read("scene")
         scene = run.session
@@ -413,7 +413,7 @@ class ListTables(ExploreBehaviour):
     writes = ("tables",)
 
     def work(self) -> Outcome:
-        from explore.scene.patrol import known_tables
+        from explore.scene import known_tables
 
         names = list(known_tables(_scene(self).sim))
         self.write("tables", names)

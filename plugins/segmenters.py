@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from explore.core.params import Param
-from explore.perception.segmentation import PlaneClusterSegmenter
+from explore.core import Param
+from explore.perception import PlaneClusterSegmenter
 
 #: (cluster tolerance [m], minimum cluster size) per scale preset (Görner: 0.05 m / 20 points)
 SCALE_PRESETS = {"room": (0.05, 20), "table": (0.02, 30)}

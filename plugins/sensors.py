@@ -7,12 +7,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core.params import Param
-from explore.core.typed import Points3
-from explore.sim.sensing import NOISE_MODELS, RaySensor
+from explore.core import Param, Points3
+from explore.sim import NOISE_MODELS, RaySensor
 
 if TYPE_CHECKING:
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
 
 class DepthCamera(RaySensor):
@@ -61,7 +60,7 @@ class DepthCamera(RaySensor):
 
     def colors(self, sim: Simulation, poses: np.ndarray) -> np.ndarray:
         """Per-beam RGB from pybullet's TinyRenderer at the same intrinsics."""
-        from explore.sim.bullet import p
+        from explore.sim import p
 
         out = []
         fov_v = 2.0 * np.rad2deg(np.arctan((self.height / 2.0) / self.intrinsics[1, 1]))

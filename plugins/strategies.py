@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from explore.core.params import Param
+from explore.core import Param
 
 
 @dataclass

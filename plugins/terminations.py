@@ -8,10 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from explore.core.decisions import reaches
-from explore.core.outcomes import BUDGET, NO_CANDIDATES, SUCCESS
-from explore.core.params import Param
-from explore.nbv.candidates import CONTINUE, STOP, SWITCH, Decision, PlanningContext
+from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Param, reaches
+from explore.nbv import CONTINUE, STOP, SWITCH, Decision, PlanningContext
 
 
 class Termination:

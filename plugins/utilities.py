@@ -12,9 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.params import Param
-from explore.core.typed import Points3
-from explore.mapping.visibility import (
+from explore.core import Param, Points3
+from explore.mapping import (
     ACC_NAMES,
     ENTROPY,
     HITS,
@@ -27,13 +26,13 @@ from explore.mapping.visibility import (
     REAR_VOXEL,
     TRAVERSED,
     UNK_FIRST,
-    UNKNOWN,
+    UNKNOWN_VOXELS,
     UNOBSERVED,
     TraceSettings,
     trace,
 )
-from explore.nbv.candidates import Candidate, PlanningContext, collision_free_share
-from explore.sim.scan import ScanPath
+from explore.nbv import Candidate, PlanningContext, collision_free_share
+from explore.sim import ScanPath
 
 RAY_PARAMS = (
     Param("beam_stride", int, 4, "", "use every n-th beam of a stripe / pixel (thesis: every 4th)", low=1),
@@ -160,7 +159,7 @@ class UnknownCount(RayUtility):
     name = "unknown_count"
 
     def combine(self, acc: np.ndarray, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
-        return acc[:, UNKNOWN]
+        return acc[:, UNKNOWN_VOXELS]
 
 
 class InformationGain(RayUtility):

@@ -12,11 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.geometry import fibonacci_sphere
-from explore.core.params import Param
-from explore.core.typed import Array, Points3
-from explore.mapping.visibility import first_blocked
-from explore.nbv.candidates import (
+from explore.core import Array, Param, Points3, fibonacci_sphere
+from explore.mapping import first_blocked
+from explore.nbv import (
     Candidate,
     PlanningContext,
     RepairSettings,
@@ -27,7 +25,7 @@ from explore.nbv.candidates import (
     repair,
     segments_hit_boxes,
 )
-from explore.sim.scan import ScanPath
+from explore.sim import ScanPath
 
 
 class ViewGenerator:

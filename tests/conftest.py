@@ -42,7 +42,7 @@ def _hang_guard(request: pytest.FixtureRequest) -> Iterator[None]:
 
 @pytest.fixture(scope="session")
 def registry():
-    from explore.runtime.registry import Registry
+    from explore.runtime import Registry
 
     return Registry.load()
 
@@ -54,7 +54,7 @@ def rng() -> np.random.Generator:
 
 @pytest.fixture
 def bunny_sim(registry) -> Iterator:
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         yield sim

@@ -25,9 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.core.params import Param
-from explore.runtime.behaviour import ExploreBehaviour, success
-from explore.runtime.hookspecs import hookimpl
+from explore.core import Param
+from explore.runtime import ExploreBehaviour, hookimpl, success
 
 HERE = Path(__file__).resolve()
 PLUGIN = f"{HERE}:TEST_PLUGINS"
@@ -188,7 +187,7 @@ def grid_args(tree: Path, out: Path, *extra: str) -> list[str]:
 
 
 def csv_rows(out: Path) -> list[dict]:
-    from explore.runtime.compare import read_results
+    from explore.runtime import read_results
 
     path = out / "results.csv"
     return read_results(path) if path.exists() else []
@@ -213,7 +212,7 @@ def compared(tmp_path_factory, tree_file) -> dict:
     first.send_signal(signal.SIGTERM)
     first_output, _ = first.communicate(timeout=60)
     # a run may complete while the driver is being stopped: resume counts it as finished too
-    from explore.runtime.compare import complete_metrics
+    from explore.runtime import complete_metrics
 
     finished = {p.name for p in (out / "runs").iterdir() if complete_metrics(p) is not None}
     assert {r["run_id"] for r in csv_rows(out)} <= finished
@@ -436,7 +435,7 @@ def test_an_unreachable_ray_address_is_one_line_and_exit_2(tree_file, tmp_path) 
 
 @pytest.mark.slow
 def test_crash_and_timeout_are_recorded_and_do_not_stop_the_others(tree_file, tmp_path) -> None:
-    from explore.runtime.compare import Grid, compare, make_registry
+    from explore.runtime import Grid, compare, make_registry
 
     registry = make_registry([PLUGIN])
     grid = Grid(
@@ -499,7 +498,7 @@ def test_plot_only_without_results_is_bad_input(tmp_path, capsys) -> None:
 
 
 def test_report_of_crashed_runs_only_has_every_table_and_no_empty_plot(tmp_path) -> None:
-    from explore.runtime.report import write_report
+    from explore.runtime import write_report
 
     rows = [
         {"run_id": f"w__s{i}", "world": "w", "strategy": f"s{i}", "planner": "default", "robot": "default",
@@ -514,7 +513,7 @@ def test_report_of_crashed_runs_only_has_every_table_and_no_empty_plot(tmp_path)
 
 
 def test_step_times_count_only_leaf_behaviours(tmp_path) -> None:
-    from explore.runtime.report import step_times
+    from explore.runtime import step_times
 
     events = [
         ("Loop", "RUNNING", 0.0), ("Scan", "RUNNING", 0.0), ("Scan", "SUCCESS", 1.5), ("Plan", "RUNNING", 1.5),

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.core.errors import BadInput
-from explore.perception.database import ObjectDatabase
-from explore.sim.meshes import TriMesh, box_mesh
+from explore.core import BadInput
+from explore.perception import ObjectDatabase
+from explore.sim import TriMesh, box_mesh
 
 
 def _mesh(size: float = 0.1) -> TriMesh:
@@ -65,7 +65,7 @@ def test_missing_database_without_create(tmp_path):
 
 
 def test_seed_from_world(registry, tmp_path):
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("tabletop", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         truth = db.seed_from_world(sim)
@@ -83,8 +83,8 @@ def test_seed_from_world(registry, tmp_path):
 
 
 def _writer(path: str, prefix: str, count: int) -> None:
-    from explore.perception.database import ObjectDatabase
-    from explore.sim.meshes import box_mesh
+    from explore.perception import ObjectDatabase
+    from explore.sim import box_mesh
 
     with ObjectDatabase.open(path) as db:
         for i in range(count):
@@ -168,7 +168,7 @@ def test_newer_schema_refused(tmp_path):
 def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     from explore_cli.main import main
 
-    from explore.sim.meshes import read_mesh
+    from explore.sim import read_mesh
 
     monkeypatch.chdir(tmp_path)
     db = str(tmp_path / "cli.db")
@@ -253,7 +253,7 @@ def test_db_add_stores_descriptors_and_provenance(tmp_path, capsys):
     import open3d as o3d
     from explore_cli.main import main
 
-    from explore.perception.recognition import PPFRecognizer, VFHRecognizer
+    from explore.perception import PPFRecognizer, VFHRecognizer
 
     mesh = tmp_path / "box.ply"
     o3d.io.write_triangle_mesh(str(mesh), _mesh().to_open3d())

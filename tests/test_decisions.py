@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from explore.core.decisions import TIE, pick_best, reaches
+from explore.core import TIE, pick_best, reaches
 
 
 def test_pick_best_breaks_near_ties_by_order_and_reports_the_lead() -> None:

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from explore.runtime.rundiff import run_differences
-from explore.runtime.trees import list_trees
+from explore.runtime import list_trees, run_differences
 
 EXPLORE = Path(sys.executable).parent / "explore"
 SMALL_NBVS = ["--set", "start_nbvs.n_samples=800", "--set", "start_nbvs.top=6", "--set", "strategy.k=10"]
@@ -50,3 +49,13 @@ def test_same_seed_same_run_at_any_thread_count_and_load(tree: str, tmp_path: Pa
         busy.wait()
     differences = run_differences(runs["1"][0], runs["0"][0])
     assert not differences, "\n".join(differences[:20])
+
+
+def test_the_command_line_sets_one_blas_thread_before_numpy_loads() -> None:
+    from explore.core import THREAD_VARIABLES
+
+    code = ("import os, sys; import explore_cli; print('numpy' in sys.modules, "
+            f"[os.environ.get(n) for n in {list(THREAD_VARIABLES)!r}])")
+    env = {k: v for k, v in __import__("os").environ.items() if k not in THREAD_VARIABLES}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert out.stdout.strip() == f"False {['1'] * len(THREAD_VARIABLES)}", out.stderr

@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from explore.core.geometry import look_at
-from explore.mapping.metrics import (
+from explore.core import look_at
+from explore.mapping import (
     GroundTruthMetrics,
     SelectionTimer,
     chamfer,
@@ -19,13 +19,12 @@ from explore.mapping.metrics import (
     rms_error,
     sample_surface,
 )
-from explore.sim.meshes import TriMesh, sphere_mesh
-from explore.sim.scan import ScanPath
+from explore.sim import ScanPath, TriMesh, sphere_mesh
 
 
 @pytest.fixture(scope="module")
 def bunny(registry):
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         yield sim, GroundTruthMetrics(sim)
@@ -122,8 +121,8 @@ def test_ground_truth_itself_and_half_of_it(bunny) -> None:
 
 
 def test_noise_free_scans_are_accurate_and_coverage_rises(bunny) -> None:
-    from explore.mapping.surface import SurfaceModel
-    from explore.sim.acquire import target_for
+    from explore.mapping import SurfaceModel
+    from explore.sim import target_for
 
     sim, metrics = bunny
     sensor = sim.sensor

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.mapping.visibility import VoxelGrid
-from explore.nbv.candidates import CONTINUE, STOP, SWITCH, Candidate, CandidateStack, PlanningContext
+from explore.mapping import VoxelGrid
+from explore.nbv import CONTINUE, STOP, SWITCH, Candidate, CandidateStack, PlanningContext
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -95,8 +95,8 @@ def test_named_strategies_are_registered(registry) -> None:  # noqa: ANN001
 
 
 def run_session(registry, strategy: str, scans: int, seed: int = 0):  # noqa: ANN001, ANN201
-    from explore.nbv.modelling import ModellingSession
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.sim import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         session = ModellingSession(sim, strategy, registry, seed=seed, max_scans=scans, continue_after_stop=True)
@@ -127,8 +127,8 @@ def test_modelling_run_rises_and_beats_random(registry) -> None:  # noqa: ANN001
 
 @pytest.mark.slow
 def test_step_by_step_api(registry) -> None:  # noqa: ANN001
-    from explore.nbv.modelling import ModellingSession
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.sim import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         session = ModellingSession(sim, "ig/bs", registry, seed=1, max_scans=3)
@@ -175,9 +175,9 @@ def test_example_plugin_package_is_found_and_runs(tmp_path: Path) -> None:
     assert out.returncode == 0, out.stderr
     assert "example/travel_ig" in out.stdout and "explore-example-strategy" in out.stdout
     code = (
-        "from explore.runtime.registry import Registry\n"
-        "from explore.sim.simulation import Simulation\n"
-        "from explore.nbv.modelling import ModellingSession\n"
+        "from explore.runtime import Registry\n"
+        "from explore.sim import Simulation\n"
+        "from explore.nbv import ModellingSession\n"
         "reg = Registry.load()\n"
         "with Simulation('bunny_pedestal', reg) as sim:\n"
         "    r = ModellingSession(sim, 'example/travel_ig', reg, max_scans=3, continue_after_stop=True).run()\n"

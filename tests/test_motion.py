@@ -8,10 +8,9 @@ import time
 import numpy as np
 import pytest
 
-from explore.core.geometry import look_at
-from explore.motion.motion import MotionProblem, classify_blocked, linear_scan_path_ik, validate_path
-from explore.sim.scan import ScanPath
-from explore.sim.simulation import Simulation
+from explore.core import look_at
+from explore.motion import MotionProblem, classify_blocked, linear_scan_path_ik, validate_path
+from explore.sim import ScanPath, Simulation
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +51,7 @@ def test_planner_avoids_a_known_obstacle(registry, workcell, endpoints) -> None:
 
 def _clearing_scan(lo: np.ndarray, hi: np.ndarray):
     """Vertical beams without a return through the box [lo, hi]: they prove it free."""
-    from explore.sim.scan import Scan
+    from explore.sim import Scan
 
     g = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], 30), np.linspace(lo[1], hi[1], 30)), -1).reshape(-1, 2)
     n = len(g)
@@ -64,7 +63,7 @@ def _clearing_scan(lo: np.ndarray, hi: np.ndarray):
 
 def test_unknown_space_blocks_a_path_until_observed_free(workcell, endpoints) -> None:
     """With the real PVS: unknown (p = 0.5) blocks the goal; after a clearing scan it is free."""
-    from explore.mapping.pvs import PVS
+    from explore.mapping import PVS
 
     robot = workcell.robot
     a, b = endpoints
@@ -127,8 +126,8 @@ def test_only_planners_the_ompl_bindings_have_are_offered(registry) -> None:
     """No silent substitution: lazy_prm exists only if ompl.geometric binds LazyPRM (2.0.1 does not)."""
     from ompl import geometric as og
 
-    from explore.core.errors import BadInput
-    from explore.motion.motion import control_planner_names, geometric_planner_names, planner_class
+    from explore.core import BadInput
+    from explore.motion import control_planner_names, geometric_planner_names, planner_class
 
     names = registry.names("motion_planner")
     assert ("lazy_prm" in names) == hasattr(og, "LazyPRM")
@@ -151,7 +150,7 @@ def _wrapped(a: np.ndarray) -> np.ndarray:
 def test_mobile_manipulator_drives_around_the_furniture(registry, name) -> None:
     """Cluttered: tuck the arm, drive past chair_1 to the far side, untuck; executed without noise
     the controls reach the goal (the gap closed by the steering) without touching the true world."""
-    from explore.mapping.pvs import PVS
+    from explore.mapping import PVS
 
     with Simulation("cluttered", registry) as sim:
         robot = sim.robot
@@ -203,8 +202,7 @@ class _SlowProblem(MotionProblem):
 def test_the_work_clock_makes_a_plan_independent_of_the_cpu_load(workcell, endpoints) -> None:
     """A 0.3 s limit on the work clock (validity checks at nominal cost) gives the same path
     when every check takes 2 ms longer; on the wall clock the slowdown cuts the search short."""
-    from explore.motion.motion import plan
-    from explore.motion.planning_clock import work_clock
+    from explore.motion import plan, work_clock
 
     results = {}
     for clock in ("work", "wall"):
@@ -226,7 +224,7 @@ def test_the_work_clock_makes_a_plan_independent_of_the_cpu_load(workcell, endpo
 def test_a_work_budget_without_work_still_ends_by_the_wall_guard() -> None:
     """A planner that charges nothing cannot hang a run: the budget ends after
     WALL_FACTOR x limit + 1 s of wall time."""
-    from explore.motion.planning_clock import WALL_FACTOR, Budget, work_clock
+    from explore.motion import WALL_FACTOR, Budget, work_clock
 
     with work_clock():
         budget = Budget(0.02)
@@ -241,8 +239,8 @@ def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(registry) -> None:
     """Start and goal 1.2 m apart beside the table, a few cm from it: the straight drive along
     its edge is valid with the 1 cm clearance; with drive_clearance 0.2 m the base may start and
     stop there, but every pose 0.2 m or more from both ends keeps 0.2 m from the table."""
-    from explore.motion.motion import PlanarChecker, box_distance, plan_mobile
-    from explore.sim.bullet import p
+    from explore.motion import PlanarChecker, box_distance, plan_mobile
+    from explore.sim import p
 
     with Simulation("scene_small_mm", registry) as sim:
         robot = sim.robot
@@ -274,11 +272,11 @@ def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(registry) -> None:
 _ROADMAP_SOLVES = """
 import sys
 import numpy as np
-from explore.core.geometry import look_at
-from explore.motion.motion import MotionProblem, plan
-from explore.motion.planning_clock import work_clock
-from explore.runtime.registry import Registry
-from explore.sim.simulation import Simulation
+from explore.core import look_at
+from explore.motion import MotionProblem, plan
+from explore.motion import work_clock
+from explore.runtime import Registry
+from explore.sim import Simulation
 
 with Simulation("workcell", Registry.load()) as sim:
     rng = np.random.default_rng(0)

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from explore.motion.motion import MotionPlan, MotionProblem
-from explore.nbv.nbvs import (
+from explore.motion import MotionPlan, MotionProblem
+from explore.nbv import (
     STAGES,
     NBVSSession,
     ObstacleField,
@@ -17,7 +17,7 @@ from explore.nbv.nbvs import (
     rollout_batch,
     samples_needed,
 )
-from explore.sim.simulation import Simulation
+from explore.sim import Simulation
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +140,7 @@ def test_log_probability_is_the_truncated_normal_density() -> None:
     """log P (Eq. 2-3) = sum of scipy's truncated-normal log densities over the sampled errors."""
     from scipy.stats import truncnorm
 
-    from explore.motion.motion import truncated_normal, truncated_normal_logpdf
+    from explore.motion import truncated_normal, truncated_normal_logpdf
 
     sigma = np.array([1.65e-3, 0.28, 0.0])
     eps = truncated_normal(np.random.default_rng(3), sigma, 40)
@@ -172,9 +172,8 @@ def test_expected_utility_weights_and_effective_sample_size(cluttered) -> None:
 
 
 def _free_flyer_context(sim, registry):
-    from explore.mapping.pvs import PVS
-    from explore.mapping.visibility import VoxelGrid
-    from explore.nbv.candidates import PlanningContext
+    from explore.mapping import PVS, VoxelGrid
+    from explore.nbv import PlanningContext
 
     pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
     prob = (1.0 / (1.0 + np.exp(-pvs.log_odds.astype(np.float64)))).astype(np.float32)
@@ -187,8 +186,8 @@ def _free_flyer_context(sim, registry):
 
 def test_expected_utility_plugin_wraps_any_utility(registry) -> None:
     """Without noise EU equals the wrapped utility; with noise a path 5 mm from the pedestal scores 0."""
-    from explore.core.geometry import look_at
-    from explore.nbv.candidates import Candidate
+    from explore.core import look_at
+    from explore.nbv import Candidate
 
     with Simulation("bunny_pedestal", registry) as sim:
         robot = sim.robot
@@ -218,8 +217,7 @@ def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
     without noise (EU still scores with the noise model), with the metrics and pictures."""
     import json
 
-    from explore.runtime.run import RunConfig, execute
-    from explore.runtime.trees import load_tree
+    from explore.runtime import RunConfig, execute, load_tree
 
     tree = load_tree("nbvs_mobile", registry)
     assert {n.behaviour for n in tree.root.walk() if n.behaviour} >= {

@@ -9,9 +9,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from explore.mapping.pvs import FREE, OCCUPIED, PVS, THRESHOLDS, UNKNOWN, entropy_bits, logit
-from explore.mapping.pvs_kernels import traverse
-from explore.sim.scan import Scan
+from explore.mapping import FREE, OCCUPIED, PVS, THRESHOLDS, UNKNOWN, entropy_bits, logit, traverse
+from explore.sim import Scan
 
 RES = 0.01
 
@@ -348,7 +347,7 @@ def octomap_states(tree, pvs: PVS) -> np.ndarray:  # noqa: ANN001
 
 def test_agreement_with_octomap_on_a_small_scene(bunny_sim) -> None:
     pyoctomap = pytest.importorskip("pyoctomap")
-    from explore.sim.acquire import target_for
+    from explore.sim import target_for
 
     rng = np.random.default_rng(0)
     centre = np.array([0.0, 0.0, 0.58])

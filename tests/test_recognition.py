@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
-from explore.core.geometry import look_at
-from explore.perception.database import ObjectDatabase
-from explore.perception.recognition import (
+from explore.core import look_at, pose_error
+from explore.perception import (
     Q_H_MIN,
     Hypothesis,
     Model,
+    ObjectDatabase,
     PPFRecognizer,
     accepted,
     model_descriptors,
-    pose_error,
     render_and_compare,
     rivals,
     vfh_signature,
@@ -41,10 +42,15 @@ sensor:
 """
 
 
+def _error_m_deg(estimate, truth) -> tuple[float, float]:
+    t_err, r_err = pose_error(estimate, truth)
+    return t_err, math.degrees(r_err)
+
+
 @pytest.fixture(scope="module")
 def scene(registry, tmp_path_factory):
     """Tabletop overview scan, its clusters, and a database with all six objects (ground truth meshes)."""
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("tabletop", registry) as sim:
         ov = sim.spec.overview
@@ -65,7 +71,7 @@ def _check_top(hypotheses: list[Hypothesis], truth: dict, name: str) -> tuple[fl
     assert hypotheses, "no hypothesis"
     top = hypotheses[0]
     assert top.model == name, [(h.model, round(h.quality, 3)) for h in hypotheses]
-    t_err, r_err = pose_error(top.pose, truth[name])
+    t_err, r_err = _error_m_deg(top.pose, truth[name])
     assert t_err < 0.005 and r_err < 2.0, (t_err, r_err)
     wrong = [h.quality for h in hypotheses if h.model != name]
     assert all(q < top.quality for q in wrong)
@@ -139,7 +145,7 @@ def test_vfh_mean_distance_recognises_among_several(registry, scene):
     assert all(hyps[0].model == name for name, hyps in results.items() if hyps)
     duck = results["duck"][0]
     assert duck.diagnostics["mean_distance"] < recognizer.gamma
-    t_err, r_err = pose_error(duck.pose, truth["duck"])
+    t_err, r_err = _error_m_deg(duck.pose, truth["duck"])
     assert t_err < 0.005 and r_err < 2.0
     # an impossible threshold rejects everything: the cluster is unknown
     strict = registry.create("recognizer", "vfh_mean_distance", {"gamma": 1.0})
@@ -169,7 +175,7 @@ def test_q_h_threshold_rejects_every_wrong_match_with_a_partial_database(registr
             assert all(h.q_h < 0.3 for h in hypotheses), (name, [(h.model, round(h.q_h, 3)) for h in hypotheses])
         elif name == "duck":
             assert kept and kept[0].model == "duck" and kept[0].q_h > 0.9
-            t_err, r_err = pose_error(kept[0].pose, truth["duck"])
+            t_err, r_err = _error_m_deg(kept[0].pose, truth["duck"])
             assert t_err < 0.005 and r_err < 2.0
     if method != "vfh_mean_distance":
         assert proposed >= 4  # the local recognisers always propose something: the threshold decides
@@ -197,7 +203,7 @@ def test_mug_with_hidden_handle_is_ambiguous(scene, partial):
     competing = rivals(kept)
     assert competing and competing[0].model == "mug"
     assert competing[0].q_h >= 0.8 * kept[0].q_h
-    assert pose_error(competing[0].pose, kept[0].pose)[1] > 5.0
+    assert _error_m_deg(competing[0].pose, kept[0].pose)[1] > 5.0
     assert rivals(accepted(PPFRecognizer().recognize(clusters["duck"], partial, scan))) == []
 
 
@@ -226,14 +232,13 @@ def test_stored_descriptors_are_reused(registry, scene):
     table = second.table(stored)
     assert np.allclose(table.cloud.points, first.table(duck).cloud.points)
     hypotheses = second.recognize(clusters["duck"], [stored], scan)
-    assert pose_error(hypotheses[0].pose, truth["duck"])[0] < 0.005
+    assert _error_m_deg(hypotheses[0].pose, truth["duck"])[0] < 0.005
 
 
 def test_duck_touching_a_block(registry, tmp_path):
     """Bad input: an object touching another gives one cluster; PPF still finds the duck."""
-    from explore.perception.database import object_frame
-    from explore.perception.segmentation import PlaneClusterSegmenter
-    from explore.sim.simulation import Simulation
+    from explore.perception import PlaneClusterSegmenter, object_frame
+    from explore.sim import Simulation
 
     path = tmp_path / "touching.yaml"
     path.write_text(TOUCHING_WORLD)
@@ -244,18 +249,18 @@ def test_duck_touching_a_block(registry, tmp_path):
     segmentation = PlaneClusterSegmenter(cluster_tolerance=0.02, min_cluster_size=30).segment(scan)
     assert len(segmentation.clusters) == 1
     hypotheses = PPFRecognizer().recognize(segmentation.clusters[0], [Model("duck", mesh)], scan)
-    t_err, r_err = pose_error(hypotheses[0].pose, truth)
+    t_err, r_err = _error_m_deg(hypotheses[0].pose, truth)
     assert t_err < 0.005 and r_err < 2.0
     # the block's points are unexplained: q_h drops below the isolated duck's > 0.9
     assert 0.1 < hypotheses[0].quality < 0.9
 
 
 def test_empty_cluster_and_no_models(scene):
-    from explore.perception.segmentation import Cluster
+    from explore.perception import Cluster
 
     scan, clusters, models, truth = scene
     empty = Cluster(0, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    from explore.perception.recognition import FPFHRansacRecognizer, VFHRecognizer
+    from explore.perception import FPFHRansacRecognizer, VFHRecognizer
 
     for recognizer in (PPFRecognizer(), FPFHRansacRecognizer(), VFHRecognizer()):
         assert recognizer.recognize(empty, models, scan) == []
@@ -266,7 +271,7 @@ def test_symmetric_poses_are_not_rivals():
     """A cube turned by 90 deg puts its surface where it was: the same explanation, not an ambiguity."""
     from scipy.spatial.transform import Rotation
 
-    from explore.sim.meshes import box_mesh
+    from explore.sim import box_mesh
 
     box = box_mesh(np.array([0.1, 0.1, 0.08]))
 

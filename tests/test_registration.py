@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from explore.core.geometry import invert, look_at, rotation_angle, transform_points
-from explore.perception.registration import (
+from explore.core import invert, look_at, pose_error, rotation_angle, transform_points
+from explore.perception import (
     PoseGraph,
     as_2d_transform,
     estimate_normals,
@@ -17,7 +17,6 @@ from explore.perception.registration import (
     icp_local,
     plane_frame,
     plane_icp,
-    pose_error,
     pose_graph_from_scans,
     rebase_scan,
     sigmas6,
@@ -48,7 +47,7 @@ def _residual(correction: np.ndarray, center: np.ndarray) -> tuple[float, float]
 
 @pytest.fixture(scope="module")
 def tabletop(registry):
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("tabletop", registry) as sim:
         yield sim
@@ -254,7 +253,7 @@ def test_rebase_scan_round_trip(tabletop):
 
 def test_pose_graph_halves_the_error_of_a_noisy_mobile_base(registry):
     """12 views around table_b of two_tables; odometry 1.5 cm / 1.5 deg per step accumulates."""
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     n, sigma_t, sigma_r = 12, 0.015, math.radians(1.5)
     rng = np.random.default_rng(0)
@@ -293,8 +292,8 @@ def test_incremental_planar_graph_recovers_a_30_degree_heading_error(tabletop):
     sigma of the prediction finds it (the gates are measured at the sensor: the turn moves the
     world frame by ~0.6 m), and the 3-D map localisation of the first view does not slide the
     table's front edge onto its back edge."""
-    from explore.perception.registration import IncrementalPoseGraph
-    from explore.scene.session import FLOOR, environment_reference
+    from explore.perception import IncrementalPoseGraph
+    from explore.scene import FLOOR, environment_reference
 
     sim = tabletop
     rng = np.random.default_rng(4)
@@ -397,7 +396,7 @@ def test_scene_icp_repeats_bit_for_bit_with_every_thread(table_views):
     2-thread runs gave four transforms); register_pair runs it on one thread, so it repeats exactly."""
     import open3d as o3d
 
-    from explore.perception.registration import register_pair
+    from explore.perception import register_pair
 
     target, source, _ = table_views
     o3d.utility.set_max_threads(2)

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from explore.core.errors import BadInput, RegistryError
-from explore.core.params import Param, validate_params
-from explore.runtime.hookspecs import hookimpl
-from explore.runtime.registry import Registry
+from explore.core import BadInput, Param, RegistryError, validate_params
+from explore.runtime import Registry, hookimpl
 
 
 def test_builtins_are_found_through_the_entry_point(registry) -> None:

@@ -6,12 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from explore_plugins.robots import pose_error
 
-from explore.core.geometry import look_at
-from explore.motion.motion import MotionPlan
-from explore.sim.simulation import Simulation
-from explore.sim.world import list_worlds
+from explore.core import look_at, pose_error
+from explore.motion import MotionPlan
+from explore.sim import Simulation, list_worlds
 
 
 @pytest.fixture(scope="module")
@@ -186,7 +184,7 @@ def test_on_collision_stop_ends_the_motion_continue_records_every_step(bunny_sim
 def test_execute_samples_the_noise_model(two_tables) -> None:
     """Through ``execute``: errors within 3 sigma with the truncated std, none while the base
     stands still (the pan-tilt head moves alone first), log P as the model, heading spread."""
-    from explore.motion.motion import truncated_normal_logpdf
+    from explore.motion import truncated_normal_logpdf
 
     robot = two_tables.robot
     start = robot.q.copy()

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.nbv.candidates import Candidate, frame_from
-from explore.sim.scan import ScanPath
+from explore.nbv import Candidate, frame_from
+from explore.sim import ScanPath
 
 TIMING = {"elapsed_s", "selection_s_mean", "selection_s_per_scan", "planning_time_s", "planning_time_s_total"}
 
@@ -49,9 +49,9 @@ def test_model_object_models_the_bunny_and_is_deterministic(tmp_path, capsys) ->
     kinds = {e["event"] for e in events}
     assert {"start", "status", "decision", "scan", "motion", "registration", "integrated", "end"} <= kinds
     # the tree adapter adds nothing: ModellingSession.step() from Python records the same
-    from explore.nbv.modelling import ModellingSession
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     with Simulation("bunny_pedestal", registry) as sim:
@@ -153,8 +153,8 @@ def test_an_unknown_planning_clock_is_bad_input(tmp_path, capsys) -> None:
 @pytest.fixture(scope="module")
 def bunny_session(registry):
     """A free-flyer modelling session on the bunny after its initial scan."""
-    from explore.nbv.modelling import ModellingSession
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.sim import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=0, max_scans=6)
@@ -194,8 +194,8 @@ def test_nbs_rule_discards_occupied_and_keeps_unknown(bunny_session) -> None:
 @pytest.fixture(scope="module")
 def fourth_scan(registry):
     """A session after 3 scans and its 4th scan, not yet integrated."""
-    from explore.nbv.modelling import ModellingSession
-    from explore.sim.simulation import Simulation
+    from explore.nbv import ModellingSession
+    from explore.sim import Simulation
 
     with Simulation("bunny_pedestal", registry) as sim:
         session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=0, max_scans=6)
@@ -216,7 +216,7 @@ def test_register_reduces_a_pose_error(fourth_scan, registry, method, after_mm) 
     a correct scan moves by less than 0.6 mm."""
     from scipy.spatial.transform import Rotation
 
-    from explore.perception.registration import rebase_scan
+    from explore.perception import rebase_scan
 
     session, scan = fourth_scan
     points = scan.points()

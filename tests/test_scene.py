@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.core.errors import BadInput
-from explore.perception.database import ObjectDatabase
-from explore.scene.session import SceneSession, close_holes
+from explore.core import BadInput
+from explore.perception import ObjectDatabase
+from explore.scene import SceneSession, close_holes
 
 TABLE = """
 environment:
@@ -57,7 +57,7 @@ def _world(tmp_path, text: str) -> str:
 @pytest.fixture(scope="module")
 def small_run(registry, tmp_path_factory):
     """The scene_exploration tree on scene_small (duck, mug known; sorter unknown) with a fresh database."""
-    from explore.runtime.run import RunConfig, execute
+    from explore.runtime import RunConfig, execute
 
     root = tmp_path_factory.mktemp("scene")
     db = root / "objects.db"
@@ -103,7 +103,7 @@ def test_scene_exploration_tree_explains_every_object(small_run):
 
 @pytest.mark.slow
 def test_second_run_recognises_the_modelled_object(registry, small_run, tmp_path):
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     _, db = small_run
     with Simulation(_world(tmp_path, REARRANGED), registry) as sim, ObjectDatabase.open(db) as database:
@@ -123,7 +123,7 @@ def test_second_run_recognises_the_modelled_object(registry, small_run, tmp_path
 def test_touching_objects_are_split_after_recognition(registry, tmp_path):
     """Bad input: a block touching the duck forms one cluster; the duck is recognised and the points it
     does not explain become a second object (to be modelled)."""
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation(_world(tmp_path, TOUCHING), registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         db.seed_from_world(sim)
@@ -146,7 +146,7 @@ def test_touching_objects_are_split_after_recognition(registry, tmp_path):
 
 
 def test_empty_scene_is_explained_with_no_objects(registry, tmp_path):
-    from explore.runtime.run import RunConfig, execute
+    from explore.runtime import RunConfig, execute
 
     world = _world(tmp_path, EMPTY)
     config = RunConfig(tree="scene_exploration", world=world, out=tmp_path / "run",
@@ -170,7 +170,7 @@ def test_corrupted_database_is_refused_and_untouched(tmp_path, capsys):
 
 
 def test_session_refuses_bad_plugins(registry, tmp_path):
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("scene_small", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         with pytest.raises(BadInput, match="recogn"):
@@ -178,8 +178,8 @@ def test_session_refuses_bad_plugins(registry, tmp_path):
 
 
 def test_close_holes_caps_an_open_box():
-    from explore.mapping.surface import border_edges
-    from explore.sim.meshes import box_mesh
+    from explore.mapping import border_edges
+    from explore.sim import box_mesh
 
     box = box_mesh(np.array([0.1, 0.1, 0.1]))
     bottom = np.all(box.vertices[box.triangles][:, :, 2] < -0.04, axis=1)
@@ -201,11 +201,10 @@ def test_base_laser_sees_the_table_legs_and_localises_a_view(registry):
     from scipy.spatial import cKDTree
     from scipy.spatial.transform import Rotation
 
-    from explore.core.geometry import look_at, transform_points
-    from explore.perception.registration import IncrementalPoseGraph, pose_error, rebase_scan, sigmas6
-    from explore.scene.motion import Mover
-    from explore.scene.session import FLOOR, environment_reference
-    from explore.sim.simulation import Simulation
+    from explore.core import look_at, pose_error, transform_points
+    from explore.perception import IncrementalPoseGraph, rebase_scan, sigmas6
+    from explore.scene import FLOOR, Mover, environment_reference
+    from explore.sim import Simulation
 
     with Simulation("scene_small_mm", registry) as sim:
         robot = sim.robot
@@ -238,10 +237,10 @@ def test_a_drive_in_legs_ends_nearer_its_goal(registry):
     """A 4-5 m drive around the table with the noisy base, four seeds. Open loop the base ends
     13-25 cm from the planned goal, or bumps into the table (seed 3 stops 1.85 m short); with
     replan_distance 1 m (back onto the plan after every metre) 2-19 cm, without a collision."""
-    from explore.core.geometry import look_at
-    from explore.motion.planning_clock import work_clock
-    from explore.scene.motion import Mover
-    from explore.sim.simulation import Simulation
+    from explore.core import look_at
+    from explore.motion import work_clock
+    from explore.scene import Mover
+    from explore.sim import Simulation
 
     errors: dict[float, list[float]] = {0.0: [], 1.0: []}
     collisions = dict.fromkeys(errors, 0)
@@ -261,8 +260,8 @@ def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(registry):
     """Noise can stop the base within its 1 cm planning clearance of the table, where every plan
     from there is refused. With no valid configuration on the last motion, the mover backs the
     base off along its heading (2-20 cm) until planning can start, without touching anything."""
-    from explore.scene.motion import Mover
-    from explore.sim.simulation import Simulation
+    from explore.scene import Mover
+    from explore.sim import Simulation
 
     with Simulation("scene_small_mm", registry) as sim:
         robot = sim.robot
@@ -287,12 +286,10 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_
     graph (Plane ICP between views, heading from the known table) halves the scan-pose error, and the
     PVS re-integrated at the corrected poses puts less of the objects' true surface into free space;
     a later correct_poses() (the patrol's register_views) does not undo it."""
-    from explore.mapping.metrics import sample_surface
-    from explore.mapping.pvs import PVS
-    from explore.perception.registration import rebase_scan
-    from explore.scene.metrics import pose_graph_errors
-    from explore.scene.patrol import known_tables, surround
-    from explore.sim.simulation import Simulation
+    from explore.mapping import PVS, sample_surface
+    from explore.perception import rebase_scan
+    from explore.scene import known_tables, pose_graph_errors, surround
+    from explore.sim import Simulation
 
     with Simulation("scene_small_mobile", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         scene = SceneSession(sim, registry, db, seed=0)
@@ -318,7 +315,7 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_
 
 def _explore_scene(registry, tmp_path, tree: str, world: str) -> tuple[dict, Path]:
     """Run a scene tree (seed 0, fresh database): every cluster ends recognised or modelled."""
-    from explore.runtime.run import RunConfig, execute
+    from explore.runtime import RunConfig, execute
 
     db = tmp_path / "objects.db"
     result = execute(RunConfig(tree=tree, world=world, seed=0, out=tmp_path / "run",

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from explore.core.geometry import look_at
-from explore.perception.segmentation import Cloud, Cluster, euclidean_clusters, merge_clusters, ransac_iterations
+from explore.core import look_at
+from explore.perception import Cloud, Cluster, euclidean_clusters, merge_clusters, ransac_iterations
 
 TABLE_TOP = 0.625  # m, pybullet_data table.urdf at z = 0.3125 (see worlds/tabletop.yaml)
 MIN_HEIGHT = 0.01
@@ -16,7 +16,7 @@ MIN_HEIGHT = 0.01
 
 @pytest.fixture(scope="module")
 def tabletop(registry):
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation("tabletop", registry) as sim:
         yield sim
@@ -162,7 +162,7 @@ sensor:
 
 def make_touching_world(registry, folder):
     """A duck with a block pressed against its side; overview scan and segmentation."""
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     path = folder / "touching.yaml"
     path.write_text(TOUCHING_WORLD)

@@ -5,11 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.core.geometry import look_at
-from explore.sim.scan import ScanPath
-from explore.sim.sensing import sigma_kinect, sigma_laser_poly
-from explore.sim.simulation import Simulation
-from explore.sim.world import WorldSpec, load_world_spec
+from explore.core import look_at
+from explore.sim import ScanPath, Simulation, WorldSpec, load_world_spec, sigma_kinect, sigma_laser_poly
 
 WALL = """
 name: wall

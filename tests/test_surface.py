@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from explore.core.geometry import fibonacci_sphere
-from explore.mapping.surface import (
+from explore.core import fibonacci_sphere
+from explore.mapping import (
     SurfaceModel,
     border_edges,
     boundary_loops,
@@ -18,7 +18,7 @@ from explore.mapping.surface import (
     hole_fan_area,
     holes_of,
 )
-from explore.sim.meshes import TriMesh, box_mesh, sphere_mesh
+from explore.sim import TriMesh, box_mesh, sphere_mesh
 
 
 def _polar(mesh: TriMesh) -> np.ndarray:
@@ -224,8 +224,8 @@ VIEW_DIRECTIONS = [(1, 0, 0.3), (-1, 0, 0.3), (0, 1, 0.3), (0, -1, 0.3), (0, 0, 
 
 
 def test_bunny_scans_raise_completeness(bunny_sim) -> None:
-    from explore.mapping.metrics import GroundTruthMetrics
-    from explore.sim.acquire import target_for
+    from explore.mapping import GroundTruthMetrics
+    from explore.sim import target_for
 
     sim = bunny_sim
     sensor = sim.sensor

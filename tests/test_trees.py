@@ -8,13 +8,8 @@ import threading
 
 import pytest
 
-from explore.core.errors import BadInput
-from explore.core.params import Param
-from explore.runtime.behaviour import ExploreBehaviour, failure, success
-from explore.runtime.hookspecs import hookimpl
-from explore.runtime.registry import Registry
-from explore.runtime.run import RunConfig, execute
-from explore.runtime.trees import build, load_tree
+from explore.core import BadInput, Param
+from explore.runtime import ExploreBehaviour, Registry, RunConfig, build, execute, failure, hookimpl, load_tree, success
 
 
 class Count(ExploreBehaviour):
@@ -93,7 +88,7 @@ root:
 
 
 def test_shipped_trees_validate(registry) -> None:
-    from explore.runtime.trees import list_trees
+    from explore.runtime import list_trees
 
     trees = list_trees()
     assert {"model_object"} <= {p.stem for p in trees}
@@ -323,7 +318,7 @@ def test_bad_input_never_touches_an_existing_folder(tmp_path, capsys) -> None:
 
 def test_tree_picture_labels_are_plain_text(tmp_path, registry) -> None:
     """py_trees' Unicode symbols (missing glyphs in Graphviz fonts) become words."""
-    from explore.runtime.outputs import tree_dot
+    from explore.runtime import tree_dot
 
     root = build(load_tree("model_object", registry).root, registry)
     labels = [n.get("label") for n in tree_dot(root).get_nodes() if n.get("label")]

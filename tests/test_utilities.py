@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.mapping.visibility import (
+from explore.mapping import (
     ENTROPY,
     HITS,
     OCC_FIRST,
@@ -13,14 +13,14 @@ from explore.mapping.visibility import (
     QUAL_NEED,
     REAR_VOXEL,
     UNK_FIRST,
-    UNKNOWN,
+    UNKNOWN_VOXELS,
     TraceSettings,
     VoxelGrid,
     first_blocked,
     trace,
 )
-from explore.nbv.candidates import Candidate, CandidateStack, PlanningContext, frame_from
-from explore.sim.sensing import RaySensor
+from explore.nbv import Candidate, CandidateStack, PlanningContext, frame_from
+from explore.sim import RaySensor
 
 RES = 0.01
 
@@ -46,7 +46,7 @@ def test_entropy_until_occupied_and_counts() -> None:
     o, d = ray_x()
     acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0)[0]
     assert acc[ENTROPY] == pytest.approx(5 + h(0.99), rel=1e-6)  # IROS Eq. 1-2, stop at p >= 0.95
-    assert acc[UNKNOWN] == 5
+    assert acc[UNKNOWN_VOXELS] == 5
     assert acc[OCC_FIRST] == 0 and acc[UNK_FIRST] == 1  # the first non-free voxel is unknown
     assert acc[HITS] == 1 and acc[REAR_VOXEL] == 1  # voxel 6, behind the surface, is unknown
 
@@ -99,7 +99,7 @@ def test_hierarchical_tracing_skips_only_free_bundles() -> None:
     fine = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0)[0]
     coarse = trace(grid, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1),
                    beams_per_frame=8)[0]
-    assert coarse[UNKNOWN] == pytest.approx(fine[UNKNOWN])
+    assert coarse[UNKNOWN_VOXELS] == pytest.approx(fine[UNKNOWN_VOXELS])
     free = VoxelGrid(np.full((16, 16, 16), 0.02, dtype=np.float32), np.zeros(3), RES)
     skipped = trace(free, origins, dirs, np.zeros(64, np.int64), 1, 0.0, 1.0, TraceSettings(hierarchy=1))[0]
     assert skipped[ENTROPY] == 0.0  # every bundle is free: nothing traced

@@ -7,8 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from explore.core.geometry import look_at
-from explore.perception.validation import pvs_votes
+from explore.core import look_at
+from explore.perception import pvs_votes
 
 
 class _FixedPVS:
@@ -42,8 +42,8 @@ def test_bad_input():
 @pytest.fixture(scope="module")
 def scene(registry):
     """tabletop after the overview scan, integrated into a 10 mm PVS."""
-    from explore.mapping.pvs import PVS
-    from explore.sim.simulation import Simulation
+    from explore.mapping import PVS
+    from explore.sim import Simulation
 
     with Simulation("tabletop", registry) as sim:
         pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)

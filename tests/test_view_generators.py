@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.mapping.surface import border_edges, boundary_loops, holes_of, vertex_normals_of
-from explore.mapping.visibility import VoxelGrid
-from explore.nbv.candidates import (
+from explore.mapping import VoxelGrid, border_edges, boundary_loops, holes_of, vertex_normals_of
+from explore.nbv import (
     BETAS_DEG,
     Candidate,
     CandidateStack,
@@ -21,8 +20,7 @@ from explore.nbv.candidates import (
     rotation,
     segments_hit_boxes,
 )
-from explore.sim.meshes import TriMesh
-from explore.sim.scan import ScanPath
+from explore.sim import ScanPath, TriMesh
 
 
 class MeshSurface:

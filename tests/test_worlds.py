@@ -9,9 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.core.errors import BadInput
-from explore.sim.simulation import Simulation
-from explore.sim.world import list_worlds, load_world_spec
+from explore.core import BadInput
+from explore.sim import Simulation, list_worlds, load_world_spec
 
 SHIPPED = {"bunny_pedestal", "tabletop", "cluttered", "workcell", "two_tables"}
 
@@ -42,7 +41,7 @@ def test_bunny_rests_on_the_pedestal_at_the_requested_size(bunny_sim) -> None:
 
 
 def test_urdf_bodies_match_pybullet(registry) -> None:
-    from explore.sim.bullet import p
+    from explore.sim import p
 
     with Simulation("tabletop", registry) as sim:
         for body in sim.objects():

@@ -1,10 +1,13 @@
-"""Rigid transforms and camera frames.
+"""Rigid transforms (SE(3)), angles and camera frames: the one home of these helpers.
 
 Sensor frames follow the OpenCV convention: z looks forward, x to the right, y down.
-Poses are 4x4 homogeneous matrices named ``world_T_frame``.
+Poses are 4x4 homogeneous matrices named ``world_T_frame``. Angles are radians everywhere;
+degrees appear only in names that say so (``rpy_deg``, ``*_deg`` metrics).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -63,6 +66,56 @@ def rotation_angle(a: Pose, b: Pose) -> float:
     """Angle in radians of the rotation between two poses."""
     r = a[:3, :3].T @ b[:3, :3]
     return float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def wrap_angle(angle: float) -> float:
+    """The same angle in [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def pose_error(estimate: Pose, truth: Pose) -> tuple[float, float]:
+    """(translation error in m, rotation error in rad) between two poses."""
+    return float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3])), rotation_angle(estimate, truth)
+
+
+def project_rotation(m: Array) -> Array:
+    """Closest rotation (Frobenius norm) to a 3x3 matrix: SVD with det = +1."""
+    u, _, vt = np.linalg.svd(m)
+    d = np.sign(np.linalg.det(u @ vt)) or 1.0
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+def chordal_mean(rotations: np.ndarray, weights: Array | None = None) -> Array:
+    """Weighted chordal L2 mean of rotations (n, 3, 3): SVD projection of the weighted sum (Hartley 2013).
+
+    The same minimiser as Markley's quaternion average (the eigenvector of sum w q q^T): both
+    minimise the weighted sum of squared Frobenius distances.
+    """
+    w = np.ones(len(rotations)) if weights is None else np.asarray(weights, dtype=float)
+    return project_rotation(np.einsum("n,nij->ij", w, rotations))
+
+
+def mean_pose(poses: np.ndarray, weights: Array | None = None) -> Pose:
+    """Weighted mean of poses (n, 4, 4): mean translation and chordal mean rotation."""
+    poses = np.asarray(poses, dtype=float)
+    w = np.ones(len(poses)) if weights is None else np.asarray(weights, dtype=float)
+    out = np.eye(4)
+    out[:3, :3] = chordal_mean(poses[:, :3, :3], w)
+    out[:3, 3] = (w @ poses[:, :3, 3]) / w.sum() if w.sum() > 0 else poses[:, :3, 3].mean(axis=0)
+    return out
+
+
+def kabsch(source: Points3, target: Points3, weights: Array | None = None) -> Pose:
+    """Least-squares rigid transform with ``target ~ R source + t`` (Arun / Umeyama, SVD)."""
+    w = np.ones(len(source)) if weights is None else np.asarray(weights, dtype=float)
+    w = w / w.sum()
+    mu_s, mu_t = w @ source, w @ target
+    h = ((source - mu_s) * w[:, None]).T @ (target - mu_t)
+    r = project_rotation(h.T)
+    out = np.eye(4)
+    out[:3, :3] = r
+    out[:3, 3] = mu_t - r @ mu_s
+    return out
 
 
 def rotate_about_axis(pose: Pose, axis_local: Array, angle: float) -> Pose:

@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 from explore.core.typed import Points3  # noqa: E402
 
 
-def _equal_axes(ax, points: Points3) -> None:
+def equal_axes(ax, points: Points3) -> None:
     lo, hi = points.min(axis=0), points.max(axis=0)
     center, half = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo)) + 1e-6
     ax.set_xlim(center[0] - half, center[0] + half)
@@ -42,7 +42,7 @@ def save_points_png(
         c = colors[pick] if colors is not None else shown[:, 2]
         ax.scatter(shown[:, 0], shown[:, 1], shown[:, 2], c=c, s=0.6, cmap="viridis", depthshade=False)
         everything = [shown] + [v for v in (extra or {}).values() if len(v)]
-        _equal_axes(ax, np.vstack(everything))
+        equal_axes(ax, np.vstack(everything))
     for label, pts in (extra or {}).items():
         if len(pts):
             ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=14, marker="^", label=label)
@@ -68,7 +68,7 @@ def save_mesh_png(vertices: Points3, triangles: np.ndarray, path: str | Path, ti
         shade = 0.35 + 0.65 * np.abs(normals @ light)
         colors = plt.cm.bone(0.25 + 0.7 * shade)
         ax.add_collection3d(Poly3DCollection(tris, facecolors=colors, linewidths=0))
-        _equal_axes(ax, vertices)
+        equal_axes(ax, vertices)
     ax.set_title(title or f"{len(triangles)} triangles")
     fig.tight_layout()
     fig.savefig(path)

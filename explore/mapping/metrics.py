@@ -21,12 +21,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from explore.core.geometry import fibonacci_sphere
-from explore.core.typed import Array, Points3
-from explore.sim.meshes import TriMesh
+from explore.core import Array, Points3, fibonacci_sphere
+from explore.sim import TriMesh
 
 if TYPE_CHECKING:
-    from explore.sim.simulation import RayCaster, Simulation
+    from explore.sim import RayCaster, Simulation
 
 __all__ = [
     "GroundTruthMetrics",
@@ -137,7 +136,7 @@ def observable_surface(
         if sim is not None:
             raycaster = sim.raycaster
         else:
-            from explore.sim.simulation import RayCaster
+            from explore.sim import RayCaster
 
             raycaster = RayCaster([gt_mesh])
     if min_range is None:

@@ -50,10 +50,8 @@ from typing import Any
 import numpy as np
 
 import explore.mapping.pvs_kernels as K
-from explore.core.errors import BadInput
-from explore.core.typed import Array, Points3
-from explore.sim.meshes import TriMesh
-from explore.sim.scan import Scan
+from explore.core import Array, BadInput, Points3
+from explore.sim import Scan, TriMesh
 
 FREE, UNKNOWN, OCCUPIED = 0, 1, 2
 """State codes returned by :meth:`PVS.state`."""
@@ -657,7 +655,7 @@ class PVS:
 
     def save_png(self, path: str | Path, axis: int = 2, index: int | None = None, title: str = "") -> None:
         """Picture: a probability slice (black free, grey unknown, white occupied) and a 3-D view."""
-        from explore.core.pictures import _equal_axes, plt  # pictures selects the Agg backend
+        from explore.core import equal_axes, plt  # pictures selects the Agg backend
 
         prob = 1.0 / (1.0 + np.exp(-self.log_odds.astype(np.float64)))
         occ = self.log_odds >= np.float32(logit(0.75))
@@ -685,7 +683,7 @@ class PVS:
             pick = np.random.default_rng(0).permutation(len(pts))[:30000]
             shown = pts[pick]
             ax3.scatter(shown[:, 0], shown[:, 1], shown[:, 2], c=shown[:, 2], s=1.0, cmap="viridis")
-            _equal_axes(ax3, shown)
+            equal_axes(ax3, shown)
         c = self.counts()
         ax3.set_title(f"occupied {c['occupied']}, unknown {c['unknown']}, free {c['free']}")
         fig.suptitle(title or f"PVS {self.shape} @ {self.resolution * 1000:.0f} mm ({self.mode})")

@@ -30,11 +30,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core.typed import Array, Points3
-from explore.sim.meshes import TriMesh
+from explore.core import Array, Points3
+from explore.sim import TriMesh
 
 if TYPE_CHECKING:
-    from explore.sim.scan import Scan
+    from explore.sim import Scan
 
 __all__ = [
     "Hole",
@@ -886,7 +886,7 @@ class SurfaceModel:
 
     def save_png(self, path: str | Path, title: str = "") -> None:
         """Shaded snapshot of the mesh."""
-        from explore.core.pictures import save_mesh_png
+        from explore.core import save_mesh_png
 
         mesh = self.mesh
         text = title or (

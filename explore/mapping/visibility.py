@@ -9,7 +9,7 @@ index         quantity
 ============  ==========================================================================
 ENTROPY       sum of voxel entropies until the first voxel with p >= p_stop (IROS Eq. 1-2,
               thesis Eq. 4.32 before the 1/N_v normalisation)
-UNKNOWN       unknown voxels traversed (Wong's unknown-voxel count)
+UNKNOWN_VOXELS unknown voxels traversed (Wong's unknown-voxel count)
 QUAL_LIT      sum of q_i = lambda b_i + (1 - lambda) d_i over feature voxels seen at an
               incidence below the cut-off (thesis Eq. 4.33, literal sign)
 QUAL_NEED     sum of lambda b_i + (1 - lambda)(1 - d_i) (the "need" variant of Eq. 4.33)
@@ -45,9 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from explore.core.typed import Array, Points3
+from explore.core import Array, Points3
 
-ENTROPY, UNKNOWN, QUAL_LIT, QUAL_NEED, TRAVERSED, OCC_FIRST, UNK_FIRST = range(7)
+ENTROPY, UNKNOWN_VOXELS, QUAL_LIT, QUAL_NEED, TRAVERSED, OCC_FIRST, UNK_FIRST = range(7)
 OCCLUSION, UNOBSERVED, REAR_VOXEL, REAR_ENTROPY, PROXIMITY, HITS = range(7, 13)
 N_ACC = 13
 ACC_NAMES = (
@@ -237,7 +237,7 @@ def _trace_range(
                     out[g, TRAVERSED] += 1.0
                     out[g, OCCLUSION] += pv * h
                     if unknown:
-                        out[g, UNKNOWN] += 1.0
+                        out[g, UNKNOWN_VOXELS] += 1.0
                         out[g, UNOBSERVED] += pv
                         out[g, PROXIMITY] += pv * prox[i, j, k]
                     if has_feat[i, j, k]:

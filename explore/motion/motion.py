@@ -32,12 +32,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core.typed import Array, Points3, Pose
+from explore.core import Array, Points3, Pose, wrap_angle
 from explore.motion.planning_clock import Budget, charge
 
 if TYPE_CHECKING:
     from explore.motion.robot import Robot
-    from explore.sim.scan import ScanPath
+    from explore.sim import ScanPath
 
 SpaceFree = Callable[[np.ndarray], np.ndarray]  # points (n, 3) -> bool (n,) free
 Probability = Callable[[np.ndarray], np.ndarray]  # points (n, 3) -> occupancy (n,)
@@ -176,7 +176,7 @@ class BulletCollider:
         self_pairs: Sequence[tuple[Part, Part]] = (),
         ignore: Sequence[tuple[Part, int]] = (),
     ) -> None:
-        from explore.sim.bullet import p
+        from explore.sim import p
 
         self.p = p
         self.client = client
@@ -246,7 +246,7 @@ def self_collision_pairs(
     client: int, parts: Sequence[Part], adjacent: Callable[[Part, Part], bool], tolerance: float = 0.0
 ) -> list[tuple[Part, Part]]:
     """Non-adjacent part pairs that do not touch in the current (home) state."""
-    from explore.sim.bullet import p
+    from explore.sim import p
 
     pairs = []
     for i, a in enumerate(parts):
@@ -749,7 +749,7 @@ class PlanarChecker:
         boxes = []
         sim = getattr(robot, "sim", None)
         if sim is not None and len(points):
-            from explore.sim.bullet import p
+            from explore.sim import p
 
             zmin, zmax = float(self.z.min()), float(self.z.max())
             for body in sim.environment_ids():
@@ -907,7 +907,7 @@ def _mobile_plan(
     if not problem.is_valid(start) or not problem.is_valid(goal):
         return None
     th = base[2]
-    goal[th] = start[th] + _wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
+    goal[th] = start[th] + wrap_angle(goal[th] - start[th])  # the same heading, the shorter turn
     joints = [i for i in range(len(start)) if i not in base]
     if np.allclose(start[base], goal[base], atol=1e-9):  # the base stays put: only the joints move
         path = _joint_motion(problem, start, goal, budget, seed)
@@ -1131,10 +1131,6 @@ def control_planner_names() -> dict[str, str]:
             continue
         out[name] = cls_name
     return out
-
-
-def _wrap_angle(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 # -- scan paths and the NBS rule ---------------------------------------------------------------

@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core.typed import Array, Pose
+from explore.core import Array, Pose
 
 if TYPE_CHECKING:
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
 
 class Robot(ABC):

@@ -15,12 +15,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core.typed import Array, Points3, Pose
-from explore.sim.scan import ScanPath
+from explore.core import Array, Points3, Pose
+from explore.sim import ScanPath
 
 if TYPE_CHECKING:
-    from explore.mapping.visibility import VoxelGrid
-    from explore.sim.sensing import RaySensor
+    from explore.mapping import VoxelGrid
+    from explore.sim import RaySensor
 
 CONTINUE, SWITCH, STOP = "continue", "switch", "stop"
 
@@ -334,7 +334,7 @@ def occlusion_free_share(grid: VoxelGrid, target: Pose | ScanPath, focus: Points
     the line before the last ``margin`` (default 1.5 voxels) in front of the point. Each
     focus point is tested from the sample nearest to it along the path.
     """
-    from explore.mapping.visibility import first_blocked
+    from explore.mapping import first_blocked
 
     if focus is None or len(focus) == 0:
         return 1.0

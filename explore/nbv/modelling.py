@@ -3,8 +3,8 @@
 ::
 
     from explore.nbv.modelling import ModellingSession
-    from explore.runtime.registry import Registry
-    from explore.sim.simulation import Simulation
+    from explore.runtime import Registry
+    from explore.sim import Simulation
 
     registry = Registry.load()
     with Simulation("bunny_pedestal", registry) as sim:
@@ -34,15 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.decisions import pick_best
-from explore.core.outcomes import BUDGET, FAILURE, NO_CANDIDATES
-from explore.core.typed import Array, Pose
-from explore.mapping.metrics import GroundTruthMetrics, coverage_auc
-from explore.mapping.visibility import VoxelGrid
-from explore.motion.motion import Execution
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Pose, pick_best
+from explore.mapping import GroundTruthMetrics, VoxelGrid, coverage_auc
+from explore.motion import Execution
 from explore.nbv.candidates import STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext, frame_from
 from explore.nbv.scan_planning import KEEP_FOR_LATER, ScanMotion, ScanPlan, make_planner
-from explore.sim.scan import Scan, ScanPath
+from explore.sim import Scan, ScanPath
 
 
 @dataclass
@@ -138,8 +135,7 @@ class ModellingSession:
                  place_first: bool | None = None, register_scans: bool = False,
                  region: tuple[Array, Array] | None = None,
                  obstacles: Sequence[tuple[Array, Array]] = ()) -> None:
-        from explore.mapping.pvs import PVS
-        from explore.mapping.surface import SurfaceModel
+        from explore.mapping import PVS, SurfaceModel
 
         self.sim = sim
         self.registry = registry
@@ -317,7 +313,7 @@ class ModellingSession:
         ``max_shift``, or it turns more than ``max_angle_deg``); returns the (corrected) scan
         and the ICP result (None before there is a model).
         """
-        from explore.perception.registration import rebase_scan, scan_points_and_normals
+        from explore.perception import rebase_scan, scan_points_and_normals
 
         model = self.surface.mesh
         if len(model.vertices) < 50 or not scan.hits.any():

@@ -44,10 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.decisions import pick_best
-from explore.core.outcomes import BUDGET, FAILURE, NO_CANDIDATES
-from explore.core.typed import Array, Points3, Pose
-from explore.motion.motion import (
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Points3, Pose, pick_best, wrap_angle
+from explore.motion import (
     Execution,
     MotionPlan,
     MotionProblem,
@@ -329,7 +327,7 @@ def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, ba
 
     ``local``: robot points in the base frame at this step's arm configuration.
     """
-    from explore.motion.kernels import rigid_step_hit
+    from explore.motion import rigid_step_hit
 
     if len(local) == 0:
         return None, 0
@@ -392,10 +390,6 @@ class ViewRecord:
     plan_attempts: int = 0  # planning queries of this iteration
     plan_successes: int = 0
     planning_s: float = 0.0  # their total time
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class _FixedBeams:
@@ -469,8 +463,10 @@ class NBVSSession:
                  max_views: int = 12, seed: int = 0, beam_stride: int = 8, noise: bool = True,
                  stop_on_collision: bool = True, min_unknown: int = 30, utility_params: dict | None = None,
                  max_draws: int = 3_000_000, weighting: str = "probability", rounds: int = 3) -> None:
-        from explore.mapping.metrics import GroundTruthMetrics  # noqa: F401 - fail early if metrics are missing
-        from explore.mapping.pvs import PVS
+        from explore.mapping import (
+            PVS,
+            GroundTruthMetrics,  # noqa: F401 - fail early if metrics are missing
+        )
 
         self.sim, self.registry, self.robot, self.sensor = sim, registry, sim.robot, sim.sensor
         self.expected, self.k = bool(expected), int(k)
@@ -521,7 +517,7 @@ class NBVSSession:
 
     # -- helpers -----------------------------------------------------------------------------
     def _snapshot(self) -> Any:
-        from explore.mapping.visibility import VoxelGrid
+        from explore.mapping import VoxelGrid
 
         prob = (1.0 / (1.0 + np.exp(-self.pvs.log_odds.astype(np.float64)))).astype(np.float32)
         grid = VoxelGrid(prob, np.asarray(self.pvs.origin, dtype=float), float(self.pvs.resolution))
@@ -530,7 +526,7 @@ class NBVSSession:
 
     def coverage(self) -> float:
         """Ground-truth coverage c_a (tau 3 mm) of every point measured so far (metrics only)."""
-        from explore.mapping.metrics import GroundTruthMetrics
+        from explore.mapping import GroundTruthMetrics
 
         if self._gt is None:
             self._gt = GroundTruthMetrics(self.sim)
@@ -737,7 +733,7 @@ class NBVSSession:
             goal = s.q.copy()
             if robot.base_dofs:
                 th = robot.base_dofs[2]
-                goal[th] = self.q[th] + _wrap(goal[th] - self.q[th])
+                goal[th] = self.q[th] + wrap_angle(goal[th] - self.q[th])
                 if not robot.lower[th] <= goal[th] <= robot.upper[th]:
                     continue
             t0 = time.perf_counter()
@@ -803,7 +799,7 @@ class NBVSSession:
         self.q = np.asarray(run.final, dtype=float).copy()
         if self.robot.base_dofs:  # the heading is periodic: keep it in [-pi, pi) (within the limits)
             th = self.robot.base_dofs[2]
-            self.q[th] = _wrap(self.q[th])
+            self.q[th] = wrap_angle(self.q[th])
             self.robot.q = self.q.copy()
         return run
 
@@ -917,7 +913,7 @@ class NBVSSession:
     def save_trajectories_png(self, path: Any, title: str = "") -> None:
         """Top view: known environment, region, the executed motions (base, or sensor without a
         base), the sensor at every scan and the collisions (red crosses)."""
-        from explore.core.pictures import plt
+        from explore.core import plt
 
         fig, ax = plt.subplots(figsize=(6.5, 6), dpi=110)
         for body in self.sim.bodies:

@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.typed import Array, Pose
-from explore.motion.motion import (
+from explore.core import Array, Pose, wrap_angle
+from explore.motion import (
     BLOCK_OCCUPIED,
     BLOCK_UNKNOWN,
     Execution,
@@ -54,7 +54,7 @@ from explore.motion.motion import (
     scan_path_poses,
 )
 from explore.nbv.candidates import Candidate
-from explore.sim.scan import ScanPath
+from explore.sim import ScanPath
 
 OK, UNREACHABLE, OCCUPIED, UNKNOWN, NO_PATH = "ok", "unreachable", "occupied", "unknown", "no_path"
 KEEP_FOR_LATER = (UNKNOWN, NO_PATH)  # verdicts that leave the candidate on the stack
@@ -335,7 +335,7 @@ class ScanMotion:
         if not base:
             return configs
         th = base[2]
-        shift = start[th] + _wrap(configs[0, th] - start[th]) - configs[0, th]
+        shift = start[th] + wrap_angle(configs[0, th] - start[th]) - configs[0, th]
         out = configs.copy()
         for k in (0.0, 2 * math.pi, -2 * math.pi):
             out[:, th] = configs[:, th] + shift + k
@@ -418,10 +418,6 @@ class ScanMotion:
             "motion_duration_s": float(sum(m.duration_s for m in self.motions)),
             "motion_config_length": float(sum(m.config_length for m in self.motions)),
         }
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--planner") -> Any:

@@ -38,13 +38,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core.errors import BadInput
-from explore.core.typed import Pose
-from explore.sim.meshes import TriMesh, read_mesh
+from explore.core import BadInput, Pose
+from explore.sim import TriMesh, read_mesh
 
 if TYPE_CHECKING:
     from explore.perception.recognition import Model
-    from explore.sim.simulation import GroundTruthBody, Simulation
+    from explore.sim import GroundTruthBody, Simulation
 
 SCHEMA_VERSION = 1
 APPLICATION_ID = 0x45585052  # "EXPR"

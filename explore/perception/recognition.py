@@ -35,13 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.decisions import reaches
-from explore.core.determinism import open3d_serial
-from explore.core.geometry import invert, look_at
-from explore.core.typed import Array, Points3, Pose
-from explore.perception.segmentation import Cluster, estimate_normals
-from explore.sim.meshes import TriMesh
-from explore.sim.scan import Scan
+from explore.core import Array, Points3, Pose, invert, look_at, mean_pose, open3d_serial, pose_error, reaches
+from explore.perception.normals import estimate_normals
+from explore.perception.segmentation import Cluster
+from explore.sim import Scan, TriMesh
 
 ScanSource = Scan | Sequence[Scan] | Mapping[int, Scan]
 
@@ -124,7 +121,7 @@ def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 
     """
     import open3d as o3d
 
-    from explore.mapping.metrics import sample_surface
+    from explore.mapping import sample_surface
 
     points, _ = sample_surface(mesh, max(mesh.area(), 1e-12) / samples, seed=1)
     at_a = points @ pose_a[:3, :3].T + pose_a[:3, 3]
@@ -162,6 +159,7 @@ def rivals(
             out.append(h)
             continue
         t_err, r_err = pose_error(h.pose, best.pose)
+        r_err = math.degrees(r_err)
         if t_err <= translation and r_err <= rotation_deg:
             continue
         if meshes is not None and h.model in meshes and np.percentile(
@@ -260,7 +258,7 @@ def render_views(
         hit = np.isfinite(t_hit)
         ranges = t_hit[hit] + (rng.normal(0.0, noise, int(hit.sum())) if noise > 0 else 0.0)
         points = eye + dirs[hit] * ranges[:, None]
-        normals = estimate_normals(points, np.broadcast_to(eye, points.shape), normal_radius)
+        normals = estimate_normals(points, normal_radius, eye)
         keep = points[:, 2] >= lo[2] + min_height
         views.append(RenderedView(points[keep], normals[keep], pose))
     return views
@@ -412,29 +410,6 @@ def inlier_fraction(cluster_points: Points3, model: ModelCloud, world_T_model: P
     return float(np.isfinite(d).mean()) if len(d) else 0.0
 
 
-def average_poses(poses: Sequence[Pose], weights: Sequence[float] | None = None) -> Pose:
-    """Weighted average of rigid poses (mean translation, quaternion eigen-average rotation)."""
-    from scipy.spatial.transform import Rotation
-
-    poses = np.asarray(poses)
-    w = np.ones(len(poses)) if weights is None else np.asarray(weights, dtype=float)
-    w = w / w.sum()
-    quats = Rotation.from_matrix(poses[:, :3, :3]).as_quat()
-    m = (quats * w[:, None]).T @ quats
-    _, vecs = np.linalg.eigh(m)
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_quat(vecs[:, -1]).as_matrix()
-    out[:3, 3] = w @ poses[:, :3, 3]
-    return out
-
-
-def pose_error(estimate: Pose, truth: Pose) -> tuple[float, float]:
-    """Translation error (m) and rotation error (deg, axis-angle of R_est R_gt^T)."""
-    r = estimate[:3, :3] @ truth[:3, :3].T
-    angle = math.degrees(math.acos(float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))))
-    return float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3])), angle
-
-
 # -- shared model data ----------------------------------------------------------------------
 @dataclass
 class ModelCloud:
@@ -457,7 +432,7 @@ class ModelCloud:
 
 def model_cloud(mesh: TriMesh, sampling: float, views: int = 24, normal_radius: float = 0.01) -> ModelCloud:
     """Union of rendered views from the whole sphere (outward normals), voxel-sampled at ``sampling``."""
-    from explore.core.geometry import fibonacci_sphere
+    from explore.core import fibonacci_sphere
 
     rendered = render_views(mesh, fibonacci_sphere(views), resolution=96, normal_radius=normal_radius)
     pts = np.vstack([v.points for v in rendered])
@@ -771,7 +746,7 @@ class PPFRecognizer(_RecognizerBase):
                     break
             else:
                 groups.append([int(k)])
-        scored = [(average_poses(poses[g], votes[g]), int(votes[g].sum())) for g in groups]
+        scored = [(mean_pose(poses[g], votes[g]), int(votes[g].sum())) for g in groups]
         scored.sort(key=lambda item: -item[1])
         return scored
 

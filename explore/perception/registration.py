@@ -30,10 +30,19 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from explore.core.determinism import open3d_serial
-from explore.core.geometry import invert, rotation_angle, transform_points
-from explore.core.typed import Array, Points3, Pose
-from explore.sim.scan import Scan
+from explore.core import (
+    Array,
+    Points3,
+    Pose,
+    invert,
+    kabsch,
+    mean_pose,
+    open3d_serial,
+    pose_error,
+    transform_points,
+)
+from explore.perception.normals import estimate_normals
+from explore.sim import Scan
 
 # -- small SE(3) helpers ---------------------------------------------------------------------
 
@@ -52,50 +61,6 @@ def _as_pose(pose: Any | None) -> Pose:
     if out.shape != (4, 4) or not np.all(np.isfinite(out)):
         raise ValueError("a pose must be a finite 4x4 matrix")
     return out
-
-
-def project_rotation(m: Array) -> Array:
-    """Closest rotation (Frobenius norm) to a 3x3 matrix: SVD with det = +1."""
-    u, _, vt = np.linalg.svd(m)
-    d = np.sign(np.linalg.det(u @ vt)) or 1.0
-    return u @ np.diag([1.0, 1.0, d]) @ vt
-
-
-def kabsch(source: Points3, target: Points3, weights: Array | None = None) -> Pose:
-    """Least-squares rigid transform with ``target ~ R source + t`` (Arun / Umeyama, SVD)."""
-    w = np.ones(len(source)) if weights is None else np.asarray(weights, dtype=float)
-    w = w / w.sum()
-    mu_s, mu_t = w @ source, w @ target
-    h = ((source - mu_s) * w[:, None]).T @ (target - mu_t)
-    r = project_rotation(h.T)
-    out = np.eye(4)
-    out[:3, :3] = r
-    out[:3, 3] = mu_t - r @ mu_s
-    return out
-
-
-def pose_error(estimate: Pose, truth: Pose) -> tuple[float, float]:
-    """(translation error in m, rotation error in rad) between two poses."""
-    return float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3])), rotation_angle(estimate, truth)
-
-
-def estimate_normals(points: Points3, radius: float, viewpoints: Points3 | None = None, max_nn: int = 30) -> Points3:
-    """Unit normals by PCA over a ball of ``radius`` (Open3D), oriented towards ``viewpoints``.
-
-    ``viewpoints`` is (n, 3) (per-point sensor origins) or (3,); without it the normals keep
-    Open3D's arbitrary sign.
-    """
-    import open3d as o3d
-
-    pts = _as_points(points, "points")
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=max_nn))
-    normals = np.asarray(cloud.normals).copy()
-    if viewpoints is not None:
-        to_view = np.broadcast_to(np.asarray(viewpoints, dtype=float), pts.shape) - pts
-        flip = np.einsum("ij,ij->i", normals, to_view) < 0.0
-        normals[flip] *= -1.0
-    return normals
 
 
 def scan_points_and_normals(scan: Scan, radius: float = 0.01) -> tuple[Points3, Points3]:
@@ -1078,12 +1043,6 @@ class FusedPose:
     clusters: int
 
 
-def chordal_mean(rotations: np.ndarray, weights: Array | None = None) -> Array:
-    """Weighted chordal L2 mean of rotations: SVD projection of the weighted sum (Hartley 2013)."""
-    w = np.ones(len(rotations)) if weights is None else np.asarray(weights, dtype=float)
-    return project_rotation(np.einsum("n,nij->ij", w, rotations))
-
-
 def fuse_poses(
     poses: Sequence[Pose] | np.ndarray,
     weights: Sequence[float] | Array | None = None,
@@ -1115,8 +1074,4 @@ def fuse_poses(
     totals = np.bincount(labels, weights=w, minlength=count)
     best = int(np.argmax(totals))
     members = np.nonzero(labels == best)[0]
-    wm = w[members]
-    pose = np.eye(4)
-    pose[:3, :3] = chordal_mean(r[members], wm)
-    pose[:3, 3] = (wm @ t[members]) / wm.sum() if wm.sum() > 0 else t[members].mean(axis=0)
-    return FusedPose(pose, members, float(totals[best]), int(count))
+    return FusedPose(mean_pose(stack[members], w[members]), members, float(totals[best]), int(count))

@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.determinism import open3d_serial
-from explore.core.typed import Array, Points3, Pose
-from explore.sim.scan import Scan
+from explore.core import Array, Points3, Pose, open3d_serial
+from explore.perception.normals import estimate_normals
+from explore.sim import Scan
 
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 
@@ -82,20 +82,6 @@ def euclidean_clusters(points: Points3, tolerance: float, min_size: int = 1, max
     keep = order[~bad[order]]
     new[keep] = np.arange(len(keep))
     return new[labels]
-
-
-def estimate_normals(points: Points3, origins: Points3, radius: float, max_nn: int = 30) -> Points3:
-    """PCA normals (Open3D, hybrid radius/kNN search) oriented towards each point's sensor origin."""
-    import open3d as o3d
-
-    if len(points) == 0:
-        return np.zeros((0, 3))
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=max_nn))
-    normals = np.asarray(cloud.normals).copy()
-    flip = np.einsum("ij,ij->i", normals, origins - points) < 0.0
-    normals[flip] *= -1.0
-    return normals
 
 
 def fit_plane_lsq(points: Points3) -> Array:
@@ -429,7 +415,7 @@ class PlaneClusterSegmenter:
     def cluster(self, objects: Cloud, up: Array = WORLD_UP, first_id: int = 0) -> list[Cluster]:
         """Euclidean clusters of the object points, with oriented normals."""
         labels = euclidean_clusters(objects.points, self.cluster_tolerance, self.min_cluster_size)
-        normals = estimate_normals(objects.points, objects.origins, max(self.normal_radius, 1e-4))
+        normals = estimate_normals(objects.points, max(self.normal_radius, 1e-4), objects.origins)
         clusters = []
         for label in range(labels.max(initial=-1) + 1):
             mask = labels == label

@@ -17,9 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.decisions import reaches
-from explore.core.geometry import transform_points
-from explore.core.typed import Points3, Pose
+from explore.core import Points3, Pose, reaches, transform_points
 
 FREE_BELOW = 0.25
 OCCUPIED_FROM = 0.75

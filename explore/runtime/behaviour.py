@@ -95,7 +95,7 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
 
     # -- work --------------------------------------------------------------------------------
     def _guarded(self) -> Outcome:
-        from explore.core.errors import BadInput
+        from explore.core import BadInput
 
         try:
             outcome = self.work()

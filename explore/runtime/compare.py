@@ -33,8 +33,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from explore.core.errors import BadInput, brief
-from explore.core.outcomes import FINISHED
+from explore.core import FINISHED, BadInput, brief
 
 RESULTS_FILE = "results.csv"
 GRID_FILE = "compare.json"
@@ -449,7 +448,7 @@ def _parse_cell(text: str) -> Any:
 
 def read_results(path: Path) -> list[dict[str, Any]]:
     """Rows of a ``results.csv`` with numbers, booleans and JSON lists parsed (BadInput if it is not one)."""
-    from explore.core.user_files import read_text
+    from explore.core import read_text
 
     text = read_text(path)
     try:

@@ -175,7 +175,7 @@ class ModellingOutputs:
 
     def run_outputs(self, out_dir: Any) -> dict[str, Any]:
         """Meshes, PVS, pictures and the modelling metrics for metrics.json."""
-        from explore.core.pictures import save_curves_png
+        from explore.core import save_curves_png
 
         out_dir = Path(out_dir)
         s = self.session
@@ -229,7 +229,7 @@ def object_results(session: Any, overall: float | None) -> list[dict[str, Any]]:
     ``result`` is ``modelled`` (c_a >= :data:`OBJECT_MODELLED`), ``partial`` (some of it),
     ``not_seen`` (c_a = 0) or ``outside_region`` (its box does not meet the region of interest).
     """
-    from explore.mapping.metrics import GroundTruthMetrics
+    from explore.mapping import GroundTruthMetrics
 
     sim = session.sim
     objects = sim.objects()

@@ -16,8 +16,7 @@ from typing import Any
 
 import pluggy
 
-from explore.core.errors import BadInput, RegistryError, brief, valid_names
-from explore.core.params import Param, validate_params
+from explore.core import BadInput, Param, RegistryError, brief, valid_names, validate_params
 from explore.runtime.hookspecs import ENTRY_POINT_GROUP, PROJECT, Specs
 
 KINDS: tuple[str, ...] = (

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.outcomes import FINISHED
+from explore.core import FINISHED
 
 STATUSES = (*FINISHED, "crashed", "timeout")
 METHOD_DIMS = ("strategy", "planner", "robot")

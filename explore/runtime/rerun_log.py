@@ -21,8 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.errors import BadInput
-from explore.core.output_paths import check_output
+from explore.core import BadInput, check_output
 
 
 def check_rerun(path: str | Path) -> None:

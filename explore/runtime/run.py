@@ -27,12 +27,19 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.determinism import set_threads
-from explore.core.errors import BadInput, Terminated
-from explore.core.outcomes import BUDGET, FAILURE, INTERRUPTED, SUCCESS
-from explore.core.output_paths import check_output
-from explore.core.params import parse_assignment, validate_params
-from explore.motion.planning_clock import work_clock
+from explore.core import (
+    BUDGET,
+    FAILURE,
+    INTERRUPTED,
+    SUCCESS,
+    BadInput,
+    Terminated,
+    check_output,
+    parse_assignment,
+    set_threads,
+    validate_params,
+)
+from explore.motion import work_clock
 
 METRICS_SCHEMA_VERSION = 1
 PLANNING_CLOCKS = ("work", "wall")
@@ -155,8 +162,7 @@ class RunContext:
     GLOBAL_SETTINGS = ("resolution",)  # read by start_modelling (PVS voxel size)
 
     def __init__(self, config: RunConfig, registry: Any, out_dir: Path) -> None:
-        from explore.sim.simulation import Simulation
-        from explore.sim.world import load_world_spec
+        from explore.sim import Simulation, load_world_spec
 
         self.config = config
         self.registry = registry
@@ -408,9 +414,9 @@ def _remove_run_files(out_dir: Path, created: Path | None) -> None:
 def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     """Everything that can be checked before a run starts: the tree, the world, plugin names,
     ``--set`` keys and plugin parameters, the Rerun file. Raises :class:`BadInput`."""
-    from explore.nbv.scan_planning import DEFAULT_PLANNER
+    from explore.nbv import DEFAULT_PLANNER
     from explore.runtime.trees import load_tree
-    from explore.sim.world import load_world_spec
+    from explore.sim import load_world_spec
 
     if isinstance(config.seed, bool) or not isinstance(config.seed, int) or config.seed < 0:
         raise BadInput("--seed", str(config.seed), "must be an integer >= 0")
@@ -422,7 +428,7 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     robot = config.robot or spec.robot.plugin
     planner = config.planner or DEFAULT_PLANNER
     if "start_nbvs" in {node.behaviour for node in tree_file.root.walk()}:  # view/state planning picks by base
-        from explore.nbv.nbvs import default_planner
+        from explore.nbv import default_planner
 
         where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
         planner = config.planner or default_planner(registry.get("robot", robot, *where).factory)
@@ -462,8 +468,8 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
 def _check_grid_size(config: RunConfig, tree_file: Any, overrides: dict[str, dict[str, Any]], spec: Any) -> None:
     """The voxel size (``--set resolution=``, else the tree's) is finite and positive, and the world's
     region at that size fits in memory: checked before the run starts, not as a MemoryError in it."""
-    from explore.core.params import Param
-    from explore.mapping.pvs import check_grid
+    from explore.core import Param
+    from explore.mapping import check_grid
 
     if "resolution" in config.settings:
         resolution = Param("resolution", float, 0.005, "m", low=1e-6).convert(

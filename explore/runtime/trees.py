@@ -14,10 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from explore.core.errors import BadInput, brief, valid_names
-from explore.core.params import validate_params
-from explore.core.user_files import load_yaml
-from explore.sim.world import repo_root
+from explore.core import BadInput, brief, load_yaml, valid_names, validate_params
+from explore.sim import repo_root
 
 COMPOSITES = ("sequence", "selector", "parallel")
 DECORATORS = (

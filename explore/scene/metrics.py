@@ -23,9 +23,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core.typed import Pose
-from explore.perception.recognition import pose_error, surface_distances
-from explore.perception.registration import kabsch
+from explore.core import Pose, kabsch, pose_error
+from explore.perception import surface_distances
 
 if TYPE_CHECKING:
     from explore.scene.session import SceneSession
@@ -34,7 +33,7 @@ if TYPE_CHECKING:
 @lru_cache(maxsize=8)
 def _world_bodies(world: str) -> tuple[tuple[str, np.ndarray], ...]:
     """(name, world vertices) of every object body of a world (loaded once)."""
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     with Simulation(world) as sim:
         return tuple((b.name, b.mesh.vertices.copy()) for b in sim.objects())
@@ -84,7 +83,7 @@ def _body_of(points: np.ndarray, sim: Any, tolerance: float = 0.01) -> tuple[str
 def _true_points(session: SceneSession, cluster: Any) -> np.ndarray:
     """Where the cluster's points really are: each moved by its view's remaining pose error
     (the body an object is must not depend on how well a drifting base was localised)."""
-    from explore.core.geometry import invert, transform_points
+    from explore.core import invert, transform_points
 
     points = cluster.points.copy()
     for index in np.unique(cluster.views):
@@ -98,7 +97,7 @@ def _in_map(session: SceneSession, obj: Any, truth: Pose) -> Pose:
     """The true pose as the robot's map has it: moved by the localisation error of the view
     that saw most of the object (so a pose error against it is the recognition's own, not the
     base's remaining drift)."""
-    from explore.core.geometry import invert
+    from explore.core import invert
 
     ids, counts = np.unique(obj.cluster.views, return_counts=True)
     view = session.views[int(ids[np.argmax(counts)])]
@@ -109,13 +108,13 @@ def _errors(estimate: Pose | None, truth: Pose | None) -> tuple[float | None, fl
     if estimate is None or truth is None:
         return None, None
     t_err, r_err = pose_error(estimate, truth)
-    return 1e3 * t_err, r_err
+    return 1e3 * t_err, math.degrees(r_err)
 
 
 def evaluate(session: SceneSession) -> dict[str, Any]:
     """metrics.json fields of a scene exploration: ``objects`` (per ground-truth object) and scene numbers."""
-    from explore.mapping.metrics import GroundTruthMetrics
-    from explore.perception.registration import fuse_poses
+    from explore.mapping import GroundTruthMetrics
+    from explore.perception import fuse_poses
 
     sim, db = session.sim, session.db
     truths: dict[str, tuple[Pose | None, str | None]] = {}
@@ -212,13 +211,13 @@ def pose_graph_errors(session: SceneSession) -> dict[str, float]:
     to the first view (the map frame a pose graph anchors; the first view's own odometry
     error cancels).
     """
-    from explore.core.geometry import invert
+    from explore.core import invert
 
     views = session.views
 
     def mean_error(poses: list[Pose], truths: list[Pose]) -> tuple[float, float]:
         errors = np.array([pose_error(p, t) for p, t in zip(poses, truths, strict=True)])
-        return float(1e3 * errors[:, 0].mean()), float(errors[:, 1].mean())
+        return float(1e3 * errors[:, 0].mean()), float(np.degrees(errors[:, 1]).mean())
 
     believed = [v.believed for v in views]
     corrected = [v.recorded for v in views]

@@ -24,9 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.geometry import invert
-from explore.core.typed import Array, Points3, Pose
-from explore.sim.scan import ScanPath
+from explore.core import Array, Points3, Pose, invert
+from explore.sim import ScanPath
 
 Target = Pose | ScanPath
 
@@ -51,7 +50,7 @@ class Move:
 def _split_drive(robot: Any, plan: Any, base_dofs: tuple[int, ...], length: float) -> tuple[Any, Any]:
     """(first leg, rest) of a plan at ``length`` metres of base travel; rest None when the
     plan drives less than 1.5 x ``length`` (no short last leg)."""
-    from explore.motion.motion import MotionPlan
+    from explore.motion import MotionPlan
 
     if plan.controls is None:
         controls, path = robot.controls_from_path(plan.path)
@@ -165,7 +164,7 @@ class Mover:
             return target, []
         robot = self.robot
         if isinstance(target, ScanPath):
-            from explore.motion.motion import linear_scan_path_ik
+            from explore.motion import linear_scan_path_ik
 
             ik = linear_scan_path_ik(robot, target, step=0.02, rng=self.rng)
             if ik.reachable < 2 or ik.fraction < self.min_path_fraction:
@@ -200,7 +199,7 @@ class Mover:
 
     # -- motion ----------------------------------------------------------------------------
     def _problem(self) -> Any:
-        from explore.motion.motion import MotionProblem
+        from explore.motion import MotionProblem
 
         pvs, limit = self.pvs, self.occupied_from
         if pvs is None:

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.typed import Array
+from explore.core import Array
 from explore.scene.views import as_target, surround_poses
 
 

@@ -2,10 +2,10 @@
 
 Kriegel thesis Fig. 3.1 (Sec. 3.1, 3.4, 5.6) with Görner's tabletop segmentation (ch. 3)::
 
-    from explore.perception.database import ObjectDatabase
-    from explore.runtime.registry import Registry
+    from explore.perception import ObjectDatabase
+    from explore.runtime import Registry
     from explore.scene.session import SceneSession
-    from explore.sim.simulation import Simulation
+    from explore.sim import Simulation
 
     registry = Registry.load()
     with Simulation("tabletop", registry) as sim, ObjectDatabase.open("objects.db") as db:
@@ -42,17 +42,24 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.geometry import invert, transform_points
-from explore.core.typed import Array, Points3, Pose
-from explore.mapping.surface import boundary_loops
-from explore.perception.recognition import Q_H_MIN, Hypothesis, Model, rivals
-from explore.perception.registration import FusedPose, PoseGraphResult, fuse_poses, rebase_scan
-from explore.perception.segmentation import Cluster, Table
-from explore.perception.validation import ACCEPT_FROM
+from explore.core import Array, Points3, Pose, invert, pose_error, transform_points
+from explore.mapping import boundary_loops
+from explore.perception import (
+    ACCEPT_FROM,
+    Q_H_MIN,
+    Cluster,
+    FusedPose,
+    Hypothesis,
+    Model,
+    PoseGraphResult,
+    Table,
+    fuse_poses,
+    rebase_scan,
+    rivals,
+)
 from explore.scene.motion import Mover, Target, target_start
 from explore.scene.views import as_target, order_by_novelty, overview_targets, viewing_distance, views_around
-from explore.sim.meshes import TriMesh
-from explore.sim.scan import Scan
+from explore.sim import Scan, TriMesh
 
 UNEXPLAINED, RECOGNISED, AMBIGUOUS, UNKNOWN, MODELLING, MODELLED = (
     "unexplained", "recognised", "ambiguous", "unknown", "modelling", "modelled")
@@ -222,7 +229,7 @@ class SceneSession:
         register: bool = True,
         progress: Callable[[str], None] | None = None,
     ) -> None:
-        from explore.mapping.pvs import PVS
+        from explore.mapping import PVS
 
         self.sim = sim
         self.registry = registry
@@ -604,10 +611,8 @@ class SceneSession:
         fused = obj.fused
         if fused is None or obj.pose is None or len(fused.members) < self.multi_view_agree:
             return False
-        from explore.perception.recognition import pose_error
-
         t_err, r_err = pose_error(fused.pose, obj.pose)
-        return t_err <= 0.01 and r_err <= 5.0
+        return t_err <= 0.01 and math.degrees(r_err) <= 5.0
 
     def fuse(self, obj: SceneObject) -> FusedPose | None:
         """Fuse the per-view hypotheses of the object's current model (weights q_h)."""
@@ -735,7 +740,7 @@ class SceneSession:
     # -- modelling unknown objects -------------------------------------------------------------
     def start_modelling(self, obj: SceneObject) -> Any:
         """A ModellingSession over the object's box (the other objects are obstacles)."""
-        from explore.nbv.modelling import ModellingSession, resolve_strategy
+        from explore.nbv import ModellingSession, resolve_strategy
 
         lo, hi = self._model_box(obj)
         others = [o.box(0.005) for o in self.objects if o.id != obj.id and len(o.cluster.points) >= self.min_points]
@@ -851,7 +856,7 @@ class SceneSession:
         representation, here fused into a mesh); add it to the database; its name."""
         from scipy.spatial import cKDTree
 
-        from explore.mapping.surface import SurfaceModel
+        from explore.mapping import SurfaceModel
 
         lo, hi = self._model_box(obj)
         points = obj.sample(0.001)
@@ -883,13 +888,12 @@ class SceneSession:
     # -- the object database -------------------------------------------------------------------
     def add_to_database(self, obj: SceneObject, world_mesh: TriMesh, scans: int) -> str:
         """Add a modelled mesh (world frame) with descriptors, provenance and location."""
-        from explore.perception.database import object_frame
-        from explore.perception.recognition import model_descriptors
+        from explore.perception import model_descriptors, object_frame
 
         start = time.perf_counter()
         world_T_model, mesh = object_frame(world_mesh)
         name = self._new_name()
-        from explore.perception.recognition import PPFRecognizer, VFHRecognizer
+        from explore.perception import PPFRecognizer, VFHRecognizer
 
         chosen = [self.recognizer] if hasattr(self.recognizer, "describe") else []  # the configured one's own
         kinds = {r.descriptor_kind for r in chosen}
@@ -946,11 +950,9 @@ class SceneSession:
     def _apply(self, poses: np.ndarray, tolerance: tuple[float, float] = (0.002, math.radians(0.2))) -> None:
         """Take the incremental graph's poses: the new view is integrated at its corrected pose;
         if an earlier view moved by more than ``tolerance`` (m, rad) everything is re-integrated."""
-        from explore.perception.registration import pose_error as se3_error
-
         moved = any(
             max(err[0] / tolerance[0], err[1] / tolerance[1]) > 1.0
-            for err in (se3_error(p, v.recorded)
+            for err in (pose_error(p, v.recorded)
                         for v, p in zip(self.views[:-1], poses[:-1], strict=True))
         )
         if moved:
@@ -964,7 +966,7 @@ class SceneSession:
 
     def reintegrate(self, poses: Sequence[Pose]) -> None:
         """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
-        from explore.mapping.pvs import PVS
+        from explore.mapping import PVS
 
         deltas = []
         for view, pose in zip(self.views, poses, strict=True):
@@ -1039,7 +1041,7 @@ class SceneSession:
 def environment_reference(sim: Any, spacing: float = 0.02, min_height: float = 0.05) -> Points3:
     """Points on the upright surfaces of the known environment (walls, table edges and legs):
     the map a mobile base localises in (a planner may know the environment; objects are left out)."""
-    from explore.mapping.metrics import sample_surface
+    from explore.mapping import sample_surface
 
     parts = []
     for body in sim.bodies:

@@ -12,10 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.geometry import look_at
-from explore.core.typed import Array, Points3, Pose
-from explore.nbv.candidates import frame_from, make_target, path_over
-from explore.sim.scan import ScanPath
+from explore.core import Array, Points3, Pose, look_at
+from explore.nbv import frame_from, make_target, path_over
+from explore.sim import ScanPath
 
 Target = Pose | ScanPath
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from explore.core.geometry import look_at
-from explore.core.typed import Array, Pose
+from explore.core import Array, Pose, look_at
 from explore.sim.scan import ScanPath
 from explore.sim.sensing import RaySensor
 

@@ -6,9 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.core.geometry import pose_from
-from explore.core.native_output import captured_output
-from explore.core.typed import Pose
+from explore.core import Pose, captured_output, pose_from
 from explore.sim.meshes import TriMesh, box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 
 with captured_output(stdout=True):  # pybullet prints its build time on import

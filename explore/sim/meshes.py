@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.core.typed import Points3, Pose
+from explore.core import Points3, Pose
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,7 @@ def read_mesh(path: str | Path) -> TriMesh:
         return read_obj(path)
     import open3d as o3d
 
-    from explore.core.native_output import captured_output
+    from explore.core import captured_output
 
     with captured_output():  # Open3D's "[Open3D WARNING] Read ... failed" would come before our one line
         mesh = o3d.io.read_triangle_mesh(str(path))

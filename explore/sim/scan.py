@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.core.typed import Array, Points3, Pose
+from explore.core import Array, Points3, Pose
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core.typed import Array, Points3, Pose
+from explore.core import Array, Points3, Pose
 from explore.sim.scan import Scan, ScanPath
 
 if TYPE_CHECKING:

@@ -13,10 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.errors import BadInput
-from explore.core.geometry import pose_from, rpy_deg_to_matrix
-from explore.core.native_output import captured_output
-from explore.core.typed import Array, Points3
+from explore.core import Array, BadInput, Points3, captured_output, pose_from, rpy_deg_to_matrix
 from explore.sim.bullet import body_visual_meshes, p
 from explore.sim.meshes import TriMesh, read_mesh
 from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path

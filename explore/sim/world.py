@@ -16,9 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core.errors import BadInput, brief
-from explore.core.typed import Array
-from explore.core.user_files import load_yaml
+from explore.core import Array, BadInput, brief, load_yaml
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
 TOP_LEVEL_FIELDS = ("name", "description", "environment", "objects", "region", "robot", "sensor", "overview")

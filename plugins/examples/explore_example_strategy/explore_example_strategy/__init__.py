@@ -12,9 +12,9 @@ import numpy as np
 from explore_plugins.strategies import make_strategy
 from explore_plugins.utilities import RAY_PARAMS, RayUtility
 
-from explore.core.params import Param
-from explore.mapping.visibility import ENTROPY
-from explore.runtime.hookspecs import hookimpl
+from explore.core import Param
+from explore.mapping import ENTROPY
+from explore.runtime import hookimpl
 
 
 class TravelIG(RayUtility):
