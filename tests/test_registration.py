@@ -404,3 +404,20 @@ def test_scene_icp_repeats_bit_for_bit_with_every_thread(table_views):
     shift[:3, 3] = [0.01, -0.008, 0.0]
     results = {register_pair(source, target, shift, voxel=0.005).transformation.tobytes() for _ in range(5)}
     assert len(results) == 1
+
+
+def test_mean_rotation_is_the_chordal_mean() -> None:
+    """The quaternion eigenvector (Markley) and the SVD projection of the weighted sum (Hartley's chordal
+    L2 mean) minimise the same Frobenius loss: one implementation serves PPF voting and multi-view fusion."""
+    from scipy.spatial.transform import Rotation
+
+    from explore.core import mean_rotation, project_rotation
+
+    rng = np.random.default_rng(4)
+    rotations = (Rotation.from_euler("z", 40, degrees=True) * Rotation.from_rotvec(0.2 * rng.normal(size=(9, 3))))
+    matrices = rotations.as_matrix()
+    weights = rng.uniform(0.5, 2.0, size=9)
+    chordal = project_rotation(np.einsum("n,nij->ij", weights, matrices))
+    assert np.allclose(mean_rotation(matrices, weights), chordal, atol=1e-9)
+    flipped = Rotation.from_quat(-rotations.as_quat()).as_matrix()  # the sign of a quaternion does not matter
+    assert np.allclose(mean_rotation(flipped, weights), chordal, atol=1e-9)

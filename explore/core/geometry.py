@@ -85,23 +85,28 @@ def project_rotation(m: Array) -> Array:
     return u @ np.diag([1.0, 1.0, d]) @ vt
 
 
-def chordal_mean(rotations: np.ndarray, weights: Array | None = None) -> Array:
-    """Weighted chordal L2 mean of rotations (n, 3, 3): SVD projection of the weighted sum (Hartley 2013).
+def mean_rotation(rotations: np.ndarray, weights: Array | None = None) -> Array:
+    """Weighted mean of rotations (n, 3, 3): the rotation closest to them all in the chordal (Frobenius) sense.
 
-    The same minimiser as Markley's quaternion average (the eigenvector of sum w q q^T): both
-    minimise the weighted sum of squared Frobenius distances.
+    Markley et al. 2007: the eigenvector of the largest eigenvalue of sum w q q^T (quaternions
+    q) minimises the weighted sum of squared Frobenius distances (the chordal L2 mean, Hartley
+    2013); the sign of each quaternion does not matter.
     """
     w = np.ones(len(rotations)) if weights is None else np.asarray(weights, dtype=float)
-    return project_rotation(np.einsum("n,nij->ij", w, rotations))
+    w = w / w.sum()
+    quats = Rotation.from_matrix(np.asarray(rotations)).as_quat()
+    _, vectors = np.linalg.eigh((quats * w[:, None]).T @ quats)
+    return Rotation.from_quat(vectors[:, -1]).as_matrix()
 
 
 def mean_pose(poses: np.ndarray, weights: Array | None = None) -> Pose:
-    """Weighted mean of poses (n, 4, 4): mean translation and chordal mean rotation."""
+    """Weighted mean of poses (n, 4, 4): mean translation and :func:`mean_rotation`."""
     poses = np.asarray(poses, dtype=float)
     w = np.ones(len(poses)) if weights is None else np.asarray(weights, dtype=float)
+    w = w / w.sum()
     out = np.eye(4)
-    out[:3, :3] = chordal_mean(poses[:, :3, :3], w)
-    out[:3, 3] = (w @ poses[:, :3, 3]) / w.sum() if w.sum() > 0 else poses[:, :3, 3].mean(axis=0)
+    out[:3, :3] = mean_rotation(poses[:, :3, :3], w)
+    out[:3, 3] = w @ poses[:, :3, 3]
     return out
 
 

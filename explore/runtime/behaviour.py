@@ -68,14 +68,20 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
     def initialise(self) -> None:
         self.feedback_message = ""
         if self.blocking:
-            self._future = self.context.submit(self._guarded)
+            self._future = self.context.submit(self._held_step)
+
+    def _held_step(self) -> tuple[Outcome, list[dict[str, Any]]]:
+        """The step in the worker thread, its trace events held until the tick takes its result."""
+        with self.context.held_trace() as held:
+            return self._guarded(), held
 
     def update(self) -> Status:
         if self.blocking:
             if self._future is None or not self._future.done():
                 return Status.RUNNING
-            outcome = self._future.result()
+            outcome, held = self._future.result()
             self._future = None
+            self.context.release(held)
         else:
             outcome = self._guarded()
         self.feedback_message = outcome.reason

@@ -18,7 +18,7 @@ import queue
 import shutil
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -177,6 +177,7 @@ class RunContext:
         self.rerun: Any = None
         self.sim: Any = None
         self._trace_file = open(out_dir / "trace.jsonl", "w", encoding="utf-8")  # noqa: SIM115
+        self._local = threading.local()
         self._worker = Worker()
         self._futures: list[Future] = []
         try:
@@ -222,10 +223,34 @@ class RunContext:
 
     # -- trace -------------------------------------------------------------------------------
     def trace(self, event: str, **fields: Any) -> None:
+        """Write one trace event (held back while a step runs in the worker, see :meth:`held_trace`)."""
         record = {"t": round(time.perf_counter() - self.started, 4), "event": event, **_jsonable(fields)}
+        held = getattr(self._local, "held", None)
+        if held is not None:
+            held.append(record)
+        else:
+            self._write(record)
+
+    def _write(self, record: dict[str, Any]) -> None:
         self.events.append(record)
         self._trace_file.write(json.dumps(record) + "\n")
         self._trace_file.flush()
+
+    @contextlib.contextmanager
+    def held_trace(self) -> Iterator[list[dict[str, Any]]]:
+        """Hold the trace events of a step that runs in the worker thread; :meth:`release` writes them
+        when the tick takes the step's result. The trace's order is then the tree's order, not the
+        order in which two threads happened to write (which depends on the machine's load)."""
+        self._local.held = held = []
+        try:
+            yield held
+        finally:
+            self._local.held = None
+
+    def release(self, held: list[dict[str, Any]]) -> None:
+        """Write the held events of a finished step (in the main thread, during the tick)."""
+        for record in held:
+            self._write(record)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
