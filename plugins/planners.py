@@ -2,7 +2,7 @@
 kinodynamic base planner (``ompl.control``) and the straight line for the free flyer.
 
 Every plugin has ``plan(problem, start, goal, seed=None) -> MotionPlan | None`` where
-``problem`` is an :class:`explore.motion.motion.MotionProblem` (validity = known environment +
+``problem`` is an :class:`explore.motion.MotionProblem` (validity = known environment +
 optional PVS free-space test).
 """
 

@@ -5,7 +5,7 @@ Sec. 2 "motion planning" and Sec. 4.5.2; Kriegel et al. IROS 2012 Sec. B6):
 
 1. **Reachability of the scan.** A linear scan path is split into 10 mm portions, each
    reached by IK from the previous one without an extra waypoint
-   (:func:`explore.motion.motion.linear_scan_path_ik`); a single view needs one IK solution. The IK
+   (:func:`explore.motion.linear_scan_path_ik`); a single view needs one IK solution. The IK
    already rejects configurations in collision with the *known* environment. A path that is
    reachable only in part (from either end) is shortened to its reachable part if that is
    at least ``min_scan_share`` of it (Kriegel thesis Algorithm 3 accepts a path that is at
@@ -13,7 +13,7 @@ Sec. 2 "motion planning" and Sec. 4.5.2; Kriegel et al. IROS 2012 Sec. B6):
 2. **The PVS along the scan.** Every configuration of the scan must be valid for the motion
    problem (known environment + every robot surface point free in the PVS: occupancy
    p < 0.05, unknown counts as an obstacle). A blocked scan follows the NBS rule
-   (:func:`explore.motion.motion.classify_blocked`): through occupied space -> discard; through
+   (:func:`explore.motion.classify_blocked`): through occupied space -> discard; through
    unknown space -> keep the candidate on the stack for later.
 3. **The approach motion** from the robot's current configuration to the scan start, by the
    motion-planner plugin (OMPL, or ``straight_line``) in the same validity checker. A

@@ -2,7 +2,7 @@
 
 The scene session asks for a sensor target (a pose or, for line sensors, a scan path);
 :class:`Mover` finds a configuration (the robot plugin's IK, for scan paths the 10 mm
-portion IK of :func:`explore.motion.motion.linear_scan_path_ik`), plans a collision-free motion with
+portion IK of :func:`explore.motion.linear_scan_path_ik`), plans a collision-free motion with
 a motion-planner plugin (known environment plus the scene PVS: nothing may enter space the
 PVS has seen occupied), and executes it with the robot's positioning noise
 (``Robot.execute``, Vasquez-Gomez Sec. A6). The free flyer is the thesis' sensor without a
@@ -157,7 +157,7 @@ class Mover:
         """(target, configurations) realising ``target``, or None if unreachable.
 
         A view needs one IK solution. A scan path needs IK for every 2 cm portion with
-        continuity (:func:`explore.motion.motion.linear_scan_path_ik`); if only a leading part of at
+        continuity (:func:`explore.motion.linear_scan_path_ik`); if only a leading part of at
         least ``min_path_fraction`` is reachable, the path is shortened to that part.
         """
         if self.free_flyer:

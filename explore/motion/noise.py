@@ -1,0 +1,44 @@
+"""The positioning-noise model of Vasquez-Gomez et al. (Sec. A6): velocity controls perturbed by zero-mean
+normal errors truncated at beta = 3 sigma, and the log of their transition density (Eq. 2, 3)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from explore.core import Array
+
+if TYPE_CHECKING:
+    pass
+
+
+# -- noise model (Vasquez-Gomez Sec. A6) -----------------------------------------------------
+def truncated_normal(rng: np.random.Generator, sigma: Array, size: int, beta: float = 3.0) -> np.ndarray:
+    """(size, len(sigma)) zero-mean normal samples truncated to |e| <= beta * sigma (rejection)."""
+    sigma = np.asarray(sigma, dtype=float)
+    out = rng.normal(size=(size, len(sigma))) * sigma
+    bad = np.abs(out) > beta * sigma
+    while bad.any():
+        out[bad] = rng.normal(size=int(bad.sum())) * np.broadcast_to(sigma, out.shape)[bad]
+        bad = np.abs(out) > beta * sigma
+    return out
+
+def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0,
+                            active: np.ndarray | None = None) -> float:
+    """Sum of log densities of the truncated normal errors (log of Eq. 2 / Eq. 3 products).
+
+    Dimensions with sigma = 0 (noise-free) contribute nothing, nor do the entries that
+    ``active`` (same shape as ``eps``) marks as not sampled (a control that commands no motion).
+    """
+    sigma = np.asarray(sigma, dtype=float)
+    use = sigma > 0
+    if not use.any() or len(eps) == 0:
+        return 0.0
+    e, s = np.asarray(eps)[:, use], sigma[use]
+    mass = math.erf(beta / math.sqrt(2.0))  # P(-beta sigma <= e <= beta sigma) = 0.997 for beta 3
+    logpdf = -0.5 * (e / s) ** 2 - np.log(s * math.sqrt(2.0 * math.pi)) - math.log(mass)
+    if active is not None:
+        logpdf = np.where(np.asarray(active, dtype=bool)[:, use], logpdf, 0.0)
+    return float(logpdf.sum())
