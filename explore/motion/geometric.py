@@ -41,7 +41,7 @@ GEOMETRIC_PLANNERS: dict[str, str] = {
 OPTIONAL_GEOMETRIC: dict[str, str] = {"lazy_prm": "LazyPRM", "lazy_prm_star": "LazyPRMstar"}
 
 # -- OMPL ------------------------------------------------------------------------------------
-def _ompl() -> tuple[Any, Any, Any]:
+def ompl_modules() -> tuple[Any, Any, Any]:
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
@@ -53,13 +53,13 @@ def seed_ompl(seed: int | None) -> None:
     """Seed OMPL's global seed generator (deterministic planning for a given seed)."""
     if seed is None:
         return
-    _, _, ou = _ompl()
+    _, _, ou = ompl_modules()
     level = ou.getLogLevel()
     ou.setLogLevel(ou.LOG_NONE)  # OMPL complains when RNGs exist already; reseeding still works
     ou.RNG.setSeed(max(1, int(seed)))
     ou.setLogLevel(level)
 
-def _space(ob: Any, lower: Array, upper: Array) -> Any:
+def real_vector_space(ob: Any, lower: Array, upper: Array) -> Any:
     space = ob.RealVectorStateSpace(len(lower))
     bounds = ob.RealVectorBounds(len(lower))
     for i, (lo, hi) in enumerate(zip(lower, upper, strict=True)):
@@ -68,7 +68,7 @@ def _space(ob: Any, lower: Array, upper: Array) -> Any:
     space.setBounds(bounds)
     return space
 
-def _state(space: Any, q: Array) -> Any:
+def ompl_state(space: Any, q: Array) -> Any:
     state = space.allocState()
     for i, v in enumerate(q):
         state[i] = float(v)
@@ -76,7 +76,7 @@ def _state(space: Any, q: Array) -> Any:
 
 def geometric_planner_names() -> list[str]:
     """The ``ompl.geometric`` planner classes this OMPL build offers (for lookups by name)."""
-    ob, og, _ = _ompl()
+    ob, og, _ = ompl_modules()
     return sorted(n for n in dir(og) if isinstance(getattr(og, n), type) and issubclass(getattr(og, n), ob.Planner))
 
 def planner_class(name: str) -> Any:
@@ -85,7 +85,7 @@ def planner_class(name: str) -> Any:
     No substitution: a planner this OMPL build lacks (e.g. LazyPRM in the ompl 2.0.1 wheel)
     is an error that lists the planners that exist.
     """
-    _, og, _ = _ompl()
+    _, og, _ = ompl_modules()
     cls_name = GEOMETRIC_PLANNERS.get(name) or OPTIONAL_GEOMETRIC.get(name) or name
     available = geometric_planner_names()
     if cls_name not in available:
@@ -144,7 +144,7 @@ def plan(
         coarse = factor > 1.0
         seed_ompl(None if seed is None else seed + attempt)
         search = budget.share(SOLVE_SHARE) if coarse else budget
-        path = _ompl_search(problem, start, goal, planner, search, simplify, range, goal_threshold, factor, budget)
+        path = ompl_search(problem, start, goal, planner, search, simplify, range, goal_threshold, factor, budget)
         if path is None:
             continue  # coarse search gave up (e.g. only an approximate solution): try fine
         if coarse:  # OMPL checked every factor x resolution: check the rest now, within the limit
@@ -164,7 +164,7 @@ def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int,
     ``checkMotion``), for robots whose ``execution_path`` differs from the straight segment
     (a differential base). Once ``budget`` expires every motion is invalid (the search winds down).
     """
-    ob, _, _ = _ompl()
+    ob, _, _ = ompl_modules()
 
     class Validator(ob.MotionValidator):
         def checkMotion(self, a: Any, b: Any, *last_valid: Any) -> bool:  # noqa: N802 - OMPL's name
@@ -175,7 +175,7 @@ def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int,
 
     return Validator(si)
 
-def _ompl_search(
+def ompl_search(
     problem: MotionProblem,
     start: Array,
     goal: Array,
@@ -192,9 +192,9 @@ def _ompl_search(
     Simplification runs in rounds of 10 shortcut attempts until one round changes nothing or
     ``budget`` (the whole call's) expires (the path is valid after every round).
     """
-    ob, og, _ = _ompl()
+    ob, og, _ = ompl_modules()
     n = len(start)
-    space = _space(ob, problem.lower, problem.upper)
+    space = real_vector_space(ob, problem.lower, problem.upper)
     ss = og.SimpleSetup(space)
     ss.setStateValidityChecker(lambda s: problem.is_valid([s[i] for i in range(n)]))
     si = ss.getSpaceInformation()
@@ -207,7 +207,7 @@ def _ompl_search(
     if step > 0 and hasattr(instance, "setRange"):
         instance.setRange(step)
     ss.setPlanner(instance)
-    ss.setStartAndGoalStates(_state(space, start), _state(space, goal), goal_threshold)
+    ss.setStartAndGoalStates(ompl_state(space, start), ompl_state(space, goal), goal_threshold)
     if isinstance(instance, og.PRM):
         if not _solve_roadmap(ss, instance, search):
             return None
@@ -245,7 +245,7 @@ def _solve_roadmap(ss: Any, prm: Any, search: Budget) -> bool:
     and goal as milestones and returns the roadmap's shortest path to the vertex nearest the
     goal (as an approximate solution); it reaches the goal when that vertex is the goal.
     """
-    ob, _, _ = _ompl()
+    ob, _, _ = ompl_modules()
     pdef = ss.getProblemDefinition()
     done = ob.plannerAlwaysTerminatingCondition()
     grow = True

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import Array
-from explore.motion.geometric import _ompl, _space, _state, seed_ompl
-from explore.motion.mobile import _BaseProblem, _mobile_plan
+from explore.motion.geometric import ompl_modules, ompl_state, real_vector_space, seed_ompl
+from explore.motion.mobile import BaseProblem, mobile_plan
 from explore.motion.planning_clock import Budget
 from explore.motion.problem import MotionProblem, check_path_until
 from explore.motion.records import MotionPlan
@@ -62,16 +62,16 @@ def plan_kinodynamic(
     (within the tolerance of ``goal``, ``MotionPlan.exact`` False): Vasquez-Gomez's RRT
     Ext-Ext leaves such a gap too.
     """
-    ob, _, _ = _ompl()
+    ob, _, _ = ompl_modules()
     from ompl import control as oc
 
     cls = control_planner_class(planner)
     robot = problem.robot
     dt = float(robot.dt)
 
-    def drive(sub: _BaseProblem, a: Array, b: Array, budget: Budget) -> tuple[np.ndarray, np.ndarray] | None:
+    def drive(sub: BaseProblem, a: Array, b: Array, budget: Budget) -> tuple[np.ndarray, np.ndarray] | None:
         seed_ompl(seed)
-        space = _space(ob, sub.lower, sub.upper)
+        space = real_vector_space(ob, sub.lower, sub.upper)
         limits = robot.base_control_limits()  # (nb,) max |u| of the base controls
         cspace = oc.RealVectorControlSpace(space, len(limits))
         cbounds = ob.RealVectorBounds(len(limits))
@@ -102,7 +102,7 @@ def plan_kinodynamic(
         if hasattr(instance, "setGoalBias"):
             instance.setGoalBias(float(goal_bias))
         ss.setPlanner(instance)
-        ss.setStartAndGoalStates(_state(space, a), _state(space, b), goal_tolerance)
+        ss.setStartAndGoalStates(ompl_state(space, a), ompl_state(space, b), goal_tolerance)
         if budget.remaining() <= 0.0:
             return None
         status = ss.solve(budget.share(0.8).ompl_condition())  # the rest: the final joint motion and its check
@@ -128,7 +128,7 @@ def plan_kinodynamic(
                 base_controls = np.vstack([base_controls, steer_controls[:, :nc]])
         return rollout, base_controls
 
-    return _mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"kinodynamic_{planner}")
+    return mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"kinodynamic_{planner}")
 
 def control_planner_class(name: str) -> Any:
     """The ``ompl.control`` planner class for a plugin name (only classes the bindings can build)."""
@@ -143,7 +143,7 @@ def control_planner_class(name: str) -> Any:
 
 def control_planner_names() -> dict[str, str]:
     """Plugin name -> ``ompl.control`` class of the control planners this OMPL can construct."""
-    ob, _, _ = _ompl()
+    ob, _, _ = ompl_modules()
     from ompl import control as oc
 
     space = ob.RealVectorStateSpace(1)

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from explore.core import Array, Points3, wrap_angle
-from explore.motion.geometric import _ompl_search, plan, seed_ompl
+from explore.motion.geometric import ompl_search, plan, seed_ompl
 from explore.motion.planning_clock import Budget, charge
 from explore.motion.problem import MotionProblem, check_path_until, path_length
 from explore.motion.records import MotionPlan
@@ -124,10 +124,10 @@ class PlanarChecker:
             return True
         return self.problem.is_valid(self.full(qb))
 
-class _BaseProblem:
+class BaseProblem:
     """The base (x, y, theta) part of a problem with the other joints carried fixed.
 
-    Duck-types :class:`MotionProblem` for :func:`_ompl_search`: validity by a
+    Duck-types :class:`MotionProblem` for :func:`ompl_search`: validity by a
     :class:`PlanarChecker`, motions as the robot drives them (``problem.motion_path``).
     """
 
@@ -200,11 +200,11 @@ def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: boo
             out.append(values)
     return out
 
-def _mobile_plan(
+def mobile_plan(
     problem: MotionProblem,
     start: Array,
     goal: Array,
-    drive: Callable[[_BaseProblem, Array, Array, Budget], tuple[np.ndarray, np.ndarray] | None],
+    drive: Callable[[BaseProblem, Array, Array, Budget], tuple[np.ndarray, np.ndarray] | None],
     time_limit: float,
     seed: int | None,
     tuck: bool,
@@ -246,7 +246,7 @@ def _mobile_plan(
         first = _joint_motion(problem, start, carried, budget, seed)
         if first is None:
             continue
-        sub = _BaseProblem(problem, carried, goal[base], lower, upper)
+        sub = BaseProblem(problem, carried, goal[base], lower, upper)
         driven = drive(sub, carried[base], goal[base], budget)
         if driven is None:
             continue
@@ -294,15 +294,15 @@ def plan_mobile(
     """
     robot = problem.robot
 
-    def drive(sub: _BaseProblem, a: Array, b: Array, budget: Budget) -> tuple[np.ndarray, np.ndarray] | None:
+    def drive(sub: BaseProblem, a: Array, b: Array, budget: Budget) -> tuple[np.ndarray, np.ndarray] | None:
         seed_ompl(seed)
         if budget.remaining() <= 0.0:
             return None
-        path = _ompl_search(sub, a, b, planner, budget.share(0.8), simplify, 0.0, 1e-6, 1.0, budget)
+        path = ompl_search(sub, a, b, planner, budget.share(0.8), simplify, 0.0, 1e-6, 1.0, budget)
         if path is None:
             return None
         controls, rolled = robot.controls_from_path(sub.full_path(path))
         base = list(robot.base_dofs)
         return rolled[:, base], controls[:, : robot.n_base_controls]
 
-    return _mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"mobile_{planner}")
+    return mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"mobile_{planner}")

@@ -308,7 +308,7 @@ class ModellingSession:
         ``registrar`` is a registrar plugin with ``register(src, src_n, tgt, tgt_n)`` (default
         ``icp``: 3 mm radius, 3 iterations, 60 deg normal gate) matching the scan's points to
         the model mesh. The correction is applied to every beam
-        (:func:`explore.perception.registration.rebase_scan`) unless the match is weak (fitness below
+        (:func:`explore.perception.rebase_scan`) unless the match is weak (fitness below
         ``min_fitness``) or implausibly large (the scan's centroid moves more than
         ``max_shift``, or it turns more than ``max_angle_deg``); returns the (corrected) scan
         and the ICP result (None before there is a model).

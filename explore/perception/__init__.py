@@ -4,38 +4,17 @@ object database.
 
 # The names other packages use (they import from the package, never from its modules).
 from explore.perception.database import ObjectDatabase, default_path, object_frame
+from explore.perception.fpfh import FPFHRansacRecognizer
+from explore.perception.fusion import FusedPose, fuse_poses
+from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model, accepted, rivals, surface_distances
+from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
+from explore.perception.incremental_graph import IncrementalPoseGraph
 from explore.perception.normals import estimate_normals
-from explore.perception.recognition import (
-    Q_H_MIN,
-    FPFHRansacRecognizer,
-    Hypothesis,
-    Model,
-    PPFRecognizer,
-    VFHRecognizer,
-    accepted,
-    model_descriptors,
-    render_and_compare,
-    rivals,
-    surface_distances,
-    vfh_signature,
-)
-from explore.perception.registration import (
-    FusedPose,
-    IcpResult,
-    IncrementalPoseGraph,
-    PoseGraph,
-    PoseGraphResult,
-    as_2d_transform,
-    fuse_poses,
-    icp_local,
-    plane_frame,
-    plane_icp,
-    pose_graph_from_scans,
-    rebase_scan,
-    register_pair,
-    scan_points_and_normals,
-    sigmas6,
-)
+from explore.perception.plane_icp import as_2d_transform, plane_frame, plane_icp
+from explore.perception.pose_graph import PoseGraph, PoseGraphResult, pose_graph_from_scans, rebase_scan, sigmas6
+from explore.perception.ppf import PPFRecognizer
+from explore.perception.recognition import model_descriptors
+from explore.perception.scene_registration import register_pair
 from explore.perception.segmentation import (
     Cloud,
     Cluster,
@@ -46,6 +25,8 @@ from explore.perception.segmentation import (
     ransac_iterations,
 )
 from explore.perception.validation import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
+from explore.perception.verification import render_and_compare
+from explore.perception.vfh import VFHRecognizer, vfh_signature
 
 __all__ = [
     "ACCEPT_FROM",

@@ -27,7 +27,6 @@ import json
 import os
 import re
 import sqlite3
-import tempfile
 import uuid
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -39,54 +38,24 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import BadInput, Pose
+from explore.perception.database_files import (
+    APPLICATION_ID,
+    BUSY_TIMEOUT_S,
+    SCHEMA,
+    SCHEMA_VERSION,
+    check_identity,
+    validate_existing,
+    write_mesh_atomic,
+)
 from explore.sim import TriMesh, read_mesh
 
 if TYPE_CHECKING:
     from explore.perception.recognition import Model
     from explore.sim import GroundTruthBody, Simulation
 
-SCHEMA_VERSION = 1
-APPLICATION_ID = 0x45585052  # "EXPR"
-SQLITE_MAGIC = b"SQLite format 3\x00"
 PROVENANCES = ("given", "modelled")
-BUSY_TIMEOUT_S = 30.0
 DEFAULT_DB = "objects.db"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}$")
-
-_SCHEMA = """
-CREATE TABLE objects (
-    id INTEGER PRIMARY KEY,
-    name TEXT NOT NULL UNIQUE,
-    mesh_file TEXT NOT NULL,
-    provenance TEXT NOT NULL CHECK (provenance IN ('given', 'modelled')),
-    world TEXT,
-    run TEXT,
-    scans INTEGER,
-    coverage REAL,
-    vertices INTEGER NOT NULL,
-    triangles INTEGER NOT NULL,
-    extent TEXT NOT NULL,
-    created TEXT NOT NULL
-);
-CREATE TABLE descriptors (
-    object_id INTEGER NOT NULL REFERENCES objects(id) ON DELETE CASCADE,
-    kind TEXT NOT NULL,
-    params TEXT NOT NULL,
-    blob BLOB NOT NULL,
-    created TEXT NOT NULL,
-    PRIMARY KEY (object_id, kind)
-);
-CREATE TABLE locations (
-    id INTEGER PRIMARY KEY,
-    object_id INTEGER NOT NULL REFERENCES objects(id) ON DELETE CASCADE,
-    world TEXT,
-    pose TEXT NOT NULL,
-    bbox TEXT,
-    time TEXT NOT NULL
-);
-CREATE INDEX locations_object ON locations(object_id, id);
-"""
-_TABLES = {"objects", "descriptors", "locations"}
 
 
 @dataclass(frozen=True)
@@ -154,7 +123,7 @@ class ObjectDatabase:
                 raise BadInput(str(path), None, "no such object database (create one with `explore db add`)")
             path.parent.mkdir(parents=True, exist_ok=True)
         else:
-            _validate_existing(path)
+            validate_existing(path)
         if readonly:
             return cls._open_readonly(path)
         try:
@@ -187,7 +156,7 @@ class ObjectDatabase:
             raise BadInput(str(path), None, "is empty, not an object database yet (`explore db add` creates one);"
                            " the file was left untouched")
         try:
-            _check_identity(path, app, version, tables)
+            check_identity(path, app, version, tables)
         except BadInput:
             connection.close()
             raise
@@ -202,13 +171,13 @@ class ObjectDatabase:
                 app = con.execute("PRAGMA application_id").fetchone()[0]
                 tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
                 if version == 0 and app == 0 and not tables:
-                    for statement in _SCHEMA.split(";"):
+                    for statement in SCHEMA.split(";"):
                         if statement.strip():
                             con.execute(statement)
                     con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
                     con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
                 else:
-                    _check_identity(self.path, app, version, tables)
+                    check_identity(self.path, app, version, tables)
             if str(con.execute("PRAGMA journal_mode").fetchone()[0]).lower() != "delete":
                 con.execute("PRAGMA journal_mode = DELETE")  # a file of an older version (WAL): one file at rest
             con.execute("PRAGMA foreign_keys = ON")
@@ -267,7 +236,7 @@ class ObjectDatabase:
         if coverage is not None and not (0.0 <= coverage <= 1.0):
             raise BadInput(str(self.path), "coverage", f"{coverage} is not within [0, 1]")
         mesh_name = f"{name}-{uuid.uuid4().hex[:12]}.ply"
-        _write_mesh_atomic(mesh, self.mesh_dir / mesh_name)
+        write_mesh_atomic(mesh, self.mesh_dir / mesh_name)
         extent = json.dumps(np.round(vertices.max(0) - vertices.min(0), 6).tolist())
         old_file: str | None = None
         try:
@@ -472,63 +441,6 @@ def _check_name(path: Path, name: str) -> None:
         raise BadInput(str(path), "name", f"{name!r} is not a valid object name (letters, digits, _ . -)")
 
 
-def _foreign(path: Path, why: str) -> BadInput:
-    return BadInput(str(path), None, f"not an explore object database ({why}); the file was left untouched")
-
-
-def _validate_existing(path: Path) -> None:
-    """Refuse a file that is not an explore database, reading it through a read-only connection."""
-    try:
-        with open(path, "rb") as handle:
-            header = handle.read(len(SQLITE_MAGIC))
-    except OSError as error:
-        raise BadInput(str(path), None, f"cannot read the object database: {error}") from None
-    if len(header) == 0:
-        return  # an empty file is an empty SQLite database (another process may be creating it)
-    if header != SQLITE_MAGIC:
-        raise _foreign(path, "not an SQLite file")
-    # SQLite may create -wal/-shm side files even for a read-only look; remove the ones we made
-    side = [Path(f"{path}{suffix}") for suffix in ("-wal", "-shm")]
-    created = [p for p in side if not p.exists()]
-    try:
-        _check_readonly(path)
-    except BadInput:
-        for p in created:
-            if p.exists() and p.stat().st_size <= 32768:
-                p.unlink(missing_ok=True)
-        raise
-
-
-def _check_readonly(path: Path) -> None:
-    try:
-        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_S)
-    except sqlite3.Error as error:
-        raise _foreign(path, str(error)) from None
-    try:
-        app = con.execute("PRAGMA application_id").fetchone()[0]
-        version = con.execute("PRAGMA user_version").fetchone()[0]
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        if version == 0 and app == 0 and not tables:
-            return  # a fresh, empty SQLite file
-        _check_identity(path, app, version, tables)
-        check = con.execute("PRAGMA quick_check").fetchone()[0]
-        if check != "ok":
-            raise _foreign(path, f"corrupted: {check}")
-    except sqlite3.DatabaseError as error:
-        raise _foreign(path, f"corrupted: {error}") from None
-    finally:
-        con.close()
-
-
-def _check_identity(path: Path, app: int, version: int, tables: set[str]) -> None:
-    if app != APPLICATION_ID:
-        raise _foreign(path, "an SQLite file of another program")
-    if version > SCHEMA_VERSION:
-        raise BadInput(str(path), None, f"schema version {version} is newer than this explore ({SCHEMA_VERSION})")
-    if version < 1 or not _TABLES <= tables:
-        raise _foreign(path, f"schema version {version} with tables {sorted(tables)}")
-
-
 def _put_descriptor(con: sqlite3.Connection, object_id: int, kind: str, array: np.ndarray,
                     params: Mapping[str, Any]) -> None:
     buffer = io.BytesIO()
@@ -539,23 +451,3 @@ def _put_descriptor(con: sqlite3.Connection, object_id: int, kind: str, array: n
     )
 
 
-def _write_mesh_atomic(mesh: TriMesh, target: Path) -> None:
-    """Write a binary PLY next to ``target`` and rename it into place."""
-    import open3d as o3d
-
-    target.parent.mkdir(parents=True, exist_ok=True)
-    o3d_mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(np.asarray(mesh.vertices, dtype=float)),
-        o3d.utility.Vector3iVector(np.asarray(mesh.triangles, dtype=np.int32)),
-    )
-    fd, tmp = tempfile.mkstemp(suffix=".ply", prefix=".tmp-", dir=target.parent)
-    os.close(fd)
-    try:
-        if not o3d.io.write_triangle_mesh(tmp, o3d_mesh, write_ascii=False):
-            raise OSError(f"cannot write {target}")
-        with open(tmp, "rb+") as handle:
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

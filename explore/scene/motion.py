@@ -11,7 +11,7 @@ robot: it moves in a straight line without noise.
 The robot's *belief* about where its sensor is comes from odometry: the base advances by
 the nominal (noise-free) motion of the executed controls, the arm joints are measured
 exactly. With a noisy base the believed pose drifts from the true one; scans are recorded at
-the believed pose and the gtsam pose graph (:mod:`explore.perception.registration`) corrects them. The
+the believed pose and the gtsam pose graph (:mod:`explore.perception.pose_graph`) corrects them. The
 true pose is kept for the metrics only.
 """
 
