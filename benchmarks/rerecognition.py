@@ -51,6 +51,10 @@ def one_seed(first: str, second: list[str], seed: int, tmp: Path) -> list[dict]:
     for world in second:
         copy = tmp / world / "objects.db"
         copy.parent.mkdir(parents=True)
+        if not db.exists():  # the first run ended before it stored anything
+            rows.append({"world": world, "seed": seed, "first_status": a.get("status"), "second_status": None,
+                         "modelled": [], "rerecognised": [], "missed": {"(first run)": a.get("reason", "no metrics")}})
+            continue
         shutil.copy(db, copy)
         if db.with_suffix(".meshes").is_dir():
             shutil.copytree(db.with_suffix(".meshes"), copy.with_suffix(".meshes"))
