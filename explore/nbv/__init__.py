@@ -24,19 +24,12 @@ from explore.nbv.candidates import (
     rotation,
     segments_hit_boxes,
 )
-from explore.nbv.modelling import ModellingSession, resolve_strategy
-from explore.nbv.nbvs import (
-    STAGES,
-    NBVSSession,
-    ObstacleField,
-    StateSamples,
-    ViewRecord,
-    default_planner,
-    expected_utility,
-    rollout_batch,
-    samples_needed,
-)
+from explore.nbv.expected_utility import ObstacleField, StateSamples, expected_utility, rollout_batch, samples_needed
+from explore.nbv.modelling import ModellingSession
+from explore.nbv.modelling_records import resolve_strategy
+from explore.nbv.nbvs import NBVSSession
 from explore.nbv.scan_planning import DEFAULT_PLANNER
+from explore.nbv.view_states import STAGES, ViewRecord, default_planner
 
 __all__ = [
     "BETAS_DEG",

@@ -29,63 +29,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Pose, pick_best
-from explore.mapping import GroundTruthMetrics, VoxelGrid, coverage_auc
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Pose
+from explore.mapping import GroundTruthMetrics, VoxelGrid
 from explore.motion import Execution
-from explore.nbv.candidates import STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext, frame_from
-from explore.nbv.scan_planning import KEEP_FOR_LATER, ScanMotion, ScanPlan, make_planner
+from explore.nbv.candidates import STOP, Candidate, CandidateStack, Decision, PlanningContext, frame_from
+from explore.nbv.modelling_metrics import Evaluation
+from explore.nbv.modelling_planning import CandidatePlanning
+from explore.nbv.modelling_records import ModellingResult, ScanRecord, resolve_strategy
+from explore.nbv.scan_planning import ScanMotion, ScanPlan, make_planner
 from explore.sim import Scan, ScanPath
 
 
-@dataclass
-class ScanRecord:
-    """What one iteration did."""
-
-    index: int
-    source: str
-    info: dict[str, Any]
-    scan_length_m: float
-    travel_m: float
-    selection_s: float
-    candidates: int
-    coverage_estimate: float
-    coverage_border: float
-    density: float
-    unknown_voxels: int
-    decision: str = ""
-    reason: str = ""
-    score: float = float("nan")
-    margin: float = float("nan")  # the chosen candidate's lead over the runner-up (explore.core.decisions)
-    termination_margin: float = float("nan")  # how far the termination rule was from its stop
-    step_s: float = 0.0
-    coverage: float = float("nan")  # ground-truth c_a, filled by metrics()
-
-
-@dataclass
-class ModellingResult:
-    """The outcome of :meth:`ModellingSession.run`."""
-
-    status: str
-    reason: str
-    records: list[ScanRecord]
-    metrics: dict[str, Any] = field(default_factory=dict)
-
-
-def resolve_strategy(strategy: Any, registry: Any) -> Any:
-    """A :class:`explore_plugins.strategies.Strategy` from a name, (name, params) or an object."""
-    if isinstance(strategy, str):
-        return registry.create("strategy", strategy, {}, "<strategy>").strategy
-    if isinstance(strategy, tuple):
-        return registry.create("strategy", strategy[0], strategy[1], "<strategy>").strategy
-    return getattr(strategy, "strategy", strategy)
-
-
-class ModellingSession:
+class ModellingSession(Evaluation, CandidatePlanning):
     """World + robot + sensor + strategy -> planned, executed scans until termination -> metrics.
 
     One iteration (:meth:`step`): :meth:`generate` candidates, :meth:`select` the best by
@@ -369,144 +328,6 @@ class ModellingSession:
             self._pending.update(source=source, info={"kind": source}, score=float("nan"))
         return self.integrate(scan)
 
-    def generate(self) -> int:
-        """Add the generator's candidates to the stack (stale ones are dropped); returns how many.
-
-        Candidates the robot surely cannot reach (capability map of a fixed-base arm, see
-        :class:`explore.nbv.scan_planning.CapabilityMap`) are left out before they are scored.
-        """
-        keep = ("sphere",) if getattr(self.generator, "persistent", False) else ()
-        self.stack.drop_stale(self.ctx.iteration, self.ctx.executed, keep_sources=keep)
-        new = [c for c in self.generator.generate(self.ctx)
-               if not any(self.stack._similar(c.pose, pose) for pose in self.ctx.executed)
-               and self.motion.may_reach(c.target)]
-        self.stack.push(new)
-        if len(self.stack) == 0 and self.fallback is not None and self.continue_after_stop:
-            extra = self._fallback_candidates()
-            self.stack.push(extra)
-            new = new + extra
-        self._pending["candidates"] = len(self.stack)
-        return len(new)
-
-    def _fallback_candidates(self) -> list[Candidate]:
-        if hasattr(self.fallback, "reset"):
-            self.fallback.reset()
-        extra = [c for c in self.fallback.generate(self.ctx) if self.motion.may_reach(c.target)]
-        for cand in extra:
-            cand.source = f"fallback_{cand.source}"
-        return extra
-
-    def select(self, rescore: bool = True) -> Candidate | None:
-        """Score the stack with the utility and pop the best candidate (timed).
-
-        ``rescore=False`` pops the next best by the scores of the last scoring (the PVS has
-        not changed since), used when planning to the best candidate failed.
-        """
-        self.ctx.available = len(self.stack)
-        if len(self.stack) == 0:
-            return None
-        items = list(self.stack)
-        if rescore:
-            start = time.perf_counter()
-            scores = np.asarray(self.utility.score(items, self.ctx), dtype=float)
-            for cand, value in zip(items, scores, strict=True):
-                cand.score = float(value)
-            elapsed = time.perf_counter() - start
-            self.selection_times.append(elapsed)
-            self.selection_sizes.append(len(items))
-            self._pending["selection_s"] = elapsed
-        else:
-            scores = np.array([c.score for c in items], dtype=float)
-        pick = pick_best(scores)  # near-ties go to the first candidate in stack order
-        chosen = self.stack.pop(pick.index if pick is not None else 0)
-        self._pending["margin"] = pick.margin if pick is not None else float("nan")
-        self.ctx.best_diagnostics = dict(chosen.diagnostics)
-        if hasattr(self.generator, "remember"):
-            self.generator.remember(chosen)
-        self._pend_candidate(chosen)
-        return chosen
-
-    @property
-    def pending_margin(self) -> float:
-        """The lead of the candidate just selected over the runner-up (explore.core.decisions)."""
-        return float(self._pending["margin"])
-
-    def terminate(self) -> Decision:
-        """Ask the termination plugin (and the hard cap); a ``switch`` sets the hole mode."""
-        if self.n_scans >= self.max_scans:
-            return Decision(STOP, f"max_scans = {self.max_scans} reached", BUDGET)
-        decision = self.termination.decide(self.ctx)
-        if decision.action == SWITCH:
-            self.ctx.mode = "hole"
-        self._pending.update(decision=decision.action, reason=decision.reason, termination_margin=decision.margin)
-        return decision
-
-    def plan(self, candidate: Candidate) -> ScanPlan:
-        """Plan one candidate: scan-path IK, PVS along the scan (NBS rule), approach motion.
-
-        See :mod:`explore.nbv.scan_planning`. The first scan is planned against the known
-        environment only (the PVS knows nothing yet); with ``place_first`` it needs no
-        approach (the sensor is put at the scan start).
-        """
-        start = None if (self.n_scans == 0 and self.place_first) else np.asarray(self.robot.q, dtype=float)
-        return self.motion.plan(candidate, start, self.n_scans + 1, use_pvs=self.n_scans > 0)
-
-    def plan_initial(self) -> ScanPlan | None:
-        """Plan the random initial scan, else the next side or edge of the region; None if none is reachable."""
-        failures: list[ScanPlan] = []
-        for candidate in self.initial_candidates():
-            result = self.plan(candidate)
-            if result.ok:
-                self._pend_candidate(candidate)
-                return result
-            failures.append(result)
-        self.plan_failure = _failure_summary("initial scans", failures)
-        return None
-
-    def plan_best(self, candidate: Candidate | None) -> ScanPlan | None:
-        """Plan the selected candidate; if that fails, the next best ones (up to ``max_plan_attempts``).
-
-        Candidates blocked by unknown space or without an approach motion go back on the
-        stack for later iterations; unreachable ones and those through occupied space are
-        discarded (NBS rule). When none of the strategy's candidates can be planned (a robot
-        with a limited workspace), the fallback generator's candidates are scored and tried
-        the same way. None (reason in ``plan_failure``) if no candidate could be planned.
-        """
-        failures: list[ScanPlan] = []
-        kept: list[Candidate] = []
-        result = self._plan_in_order(candidate, failures, kept)
-        if result is None and self.fallback is not None:
-            self.stack.push(self._fallback_candidates())
-            seconds = self.selection_times[-1] if self.selection_times else 0.0
-            candidate = self.select()
-            if candidate is not None and self.selection_times:  # one selection time per scan
-                self._pending["selection_s"] = seconds + self.selection_times.pop()
-                self.selection_sizes.pop()
-                if self.selection_times:
-                    self.selection_times[-1] = self._pending["selection_s"]
-            result = self._plan_in_order(candidate, failures, kept)
-        self.stack.push(kept)
-        if result is not None:
-            self._pend_candidate(result.candidate)
-            return result
-        self.plan_failure = _failure_summary("candidates", failures)
-        return None
-
-    def _plan_in_order(self, candidate: Candidate | None, failures: list[ScanPlan],
-                       kept: list[Candidate]) -> ScanPlan | None:
-        """Plan ``candidate``, then the next best by the last scores, until one works or the budget is spent."""
-        tried = 0
-        while candidate is not None and tried < self.max_plan_attempts:
-            result = self.plan(candidate)
-            tried += 1
-            if result.ok:
-                return result
-            failures.append(result)
-            if result.verdict in KEEP_FOR_LATER:
-                kept.append(candidate)
-            candidate = self.select(rescore=False) if tried < self.max_plan_attempts else None
-        return None
-
     def execute(self, plan: ScanPlan) -> Execution | None:
         """Run the approach motion with the robot's positioning noise (collisions with the true world).
 
@@ -585,10 +406,6 @@ class ModellingSession:
             return ""
         return self.first_stop_outcome or self._end_outcome or BUDGET
 
-    def motion_metrics(self) -> dict[str, Any]:
-        """Planning success and time, executed trajectories, collisions (see docs/metrics.md)."""
-        return self.motion.metrics()
-
     def run(self, progress: Callable[[ScanRecord], None] | None = None) -> ModellingResult:
         """Step until the termination (or ``max_scans``) stops the run."""
         while self.status == "running":
@@ -601,72 +418,7 @@ class ModellingSession:
             self.status = "stopped"
         return ModellingResult(self.status, self.reason, self.records, self.metrics())
 
-    # -- evaluation (the only place that reads the ground truth) -------------------------
-    def ground_truth(self) -> GroundTruthMetrics:
-        """The ground-truth evaluator of this world (observable surface computed once)."""
-        if self._metrics is None:
-            self._metrics = GroundTruthMetrics(self.sim)
-        return self._metrics
-
-    def coverage_curve(self) -> list[float]:
-        """Ground-truth c_a after every scan (from the point sets kept after each integration)."""
-        gt = self.ground_truth()
-        return [gt.coverage(points) for points in self.point_history]
-
-    def metrics(self, ground_truth: bool = True) -> dict[str, Any]:
-        """Scans, c_a and ĉ_m per scan, RMS error, Chamfer distance, coverage AUC, path lengths,
-        selection times, status.
-
-        ``rms_error_m`` / ``chamfer_m`` are of the final reconstruction (``*_at_stop_m`` at the
-        scan n_s the termination first said stop); ``coverage_auc`` is the mean c_a over
-        ``max_scans`` scans (a run that ended early keeps its last value). Scans that came
-        from the session's fallback generator are counted in ``fallback_scans``.
-        """
-        curve = self.coverage_curve() if ground_truth and self.point_history else []
-        for record, value in zip(self.records, curve, strict=False):
-            record.coverage = value
-        n_s = self.first_stop if self.first_stop is not None else self.n_scans
-        quality: dict[str, float] = {}
-        if curve:
-            gt = self.ground_truth()
-            final = gt.evaluate(self.point_history[-1])
-            at_stop = gt.evaluate(self.point_history[max(n_s, 1) - 1])
-            quality = {
-                "rms_error_m": final["rms_error"], "chamfer_m": final["chamfer"],
-                "rms_error_at_stop_m": at_stop["rms_error"], "chamfer_at_stop_m": at_stop["chamfer"],
-                "coverage_auc": coverage_auc(curve, self.max_scans),
-            }
-        fallback = sum(r.source.startswith("fallback_") for r in self.records)
-        return {
-            "strategy": self.strategy.name,
-            "world": self.sim.spec.name,
-            "seed": self.seed,
-            "scans": self.n_scans,
-            "n_s": n_s,
-            "stop_reason": self.first_stop_reason or self.reason,
-            "status": self.status,
-            "reason": self.reason,
-            "coverage": curve,
-            "coverage_at_stop": curve[n_s - 1] if curve and n_s >= 1 else float("nan"),
-            **quality,
-            "coverage_estimate": [r.coverage_estimate for r in self.records],
-            "coverage_border": [r.coverage_border for r in self.records],
-            "density": [r.density for r in self.records],
-            "scan_path_m": float(sum(r.scan_length_m for r in self.records)),
-            "travel_m": float(sum(r.travel_m for r in self.records)),
-            "scan_path_at_stop_m": float(sum(r.scan_length_m for r in self.records[:n_s])),
-            "selection_s": list(self.selection_times),
-            "selection_candidates": list(self.selection_sizes),
-            "sources": [r.source for r in self.records],
-            "fallback_scans": int(fallback),
-        }
 
 
-def _failure_summary(what: str, failures: list[ScanPlan]) -> str:
-    """``"10 candidates tried: 6 unreachable, 4 unknown"`` (the verdicts of failed plans)."""
-    counts: dict[str, int] = {}
-    for failure in failures:
-        counts[failure.verdict] = counts.get(failure.verdict, 0) + 1
-    detail = ", ".join(f"{n} {verdict}" for verdict, n in counts.items())
-    return f"{len(failures)} {what} tried: {detail}" if failures else f"no {what}"
+
 

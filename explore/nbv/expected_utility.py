@@ -1,0 +1,292 @@
+"""The expected utility of a view/state under positioning noise (Vasquez-Gomez et al., Algorithm 1): k noisy
+rollouts of the executed control sequence with the robot's noise model (truncated Gaussian velocity errors, Sec. A6);
+any sampled state in the obstacle region makes the candidate infeasible; else E(G) = sum_i g(s_i) eta P_i with
+P_i = prod_t p(eps_t) (Eq. 2-3, in log space, eta = 1 / sum_i P_i). samples_needed is the bound
+k >= log a / log(1 - eta gamma) (Eq. 11-18)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from explore.core import Array, Points3
+from explore.motion import (
+    MotionPlan,
+    box_distance,
+    truncated_normal,
+    truncated_normal_logpdf,
+)
+
+
+# -- the bound on k (Eq. 11-18) --------------------------------------------------------------
+def samples_needed(alpha: float, eta: float, gamma: float) -> int:
+    """Smallest k with k >= log(alpha) / log(1 - eta gamma) (Vasquez-Gomez Eq. 18).
+
+    ``alpha``: accepted probability of missing a collision (confidence 1 - alpha);
+    ``eta`` = 1 / P(R), R the region reached with errors truncated at beta (1 / 0.997 for
+    3 sigma); ``gamma`` = P(O n R), the probability that a rollout ends in the obstacle region.
+    Example (paper): alpha = 0.01, eta = 1/0.997, gamma = 0.05 -> 90.
+    """
+    if not 0.0 < alpha < 1.0:
+        raise ValueError("alpha must be in (0, 1)")
+    if gamma <= 0.0 or eta <= 0.0:
+        raise ValueError("eta and gamma must be positive (no obstacle probability: no k detects it)")
+    miss = 1.0 - eta * gamma
+    if miss <= 0.0:
+        return 1
+    return max(1, int(math.ceil(math.log(alpha) / math.log(miss) - 1e-12)))
+
+# -- obstacles as seen by the planner -------------------------------------------------------
+class ObstacleField:
+    """Clearance of points from the planning obstacles O = W_obj u W_unk u O_env (Sec. A1).
+
+    ``boxes`` are the known environment bodies as axis-aligned boxes (every shipped world
+    builds its environment from boxes); the clearance from them is the exact signed distance
+    (negative inside) minus ``box_margin``
+    (the robot's planning clearance, so that a planner-validated state has clearance >= 0).
+    The PVS contributes every voxel with p >= 0.05 (unknown is an obstacle): its distance
+    field minus half a voxel diagonal inside the grid, the distance to the grid box outside.
+    A point with clearance < 0 is in collision. Bodies below ``ground`` (the floor) are left
+    out: planar base noise never changes heights, so it cannot push the robot into them.
+    """
+
+    def __init__(self, boxes: list[tuple[Array, Array]], pvs: Any = None, box_margin: float = 0.0,
+                 ground: float = 1e-3) -> None:
+        kept = [(np.asarray(lo, float), np.asarray(hi, float)) for lo, hi in boxes if float(hi[2]) > ground]
+        self.lo = np.array([b[0] for b in kept]).reshape(-1, 3)
+        self.hi = np.array([b[1] for b in kept]).reshape(-1, 3)
+        self.box_margin = float(box_margin)
+        self.pvs = pvs
+        self._field: np.ndarray | None = None
+        self._version = -1
+
+    @classmethod
+    def from_sim(cls, sim: Any, pvs: Any = None, box_margin: float | None = None) -> ObstacleField:
+        """The known environment of ``sim`` (never its objects) plus the PVS."""
+        boxes = [tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object]
+        margin = float(getattr(getattr(sim, "robot", None), "clearance", 0.0)) if box_margin is None else box_margin
+        return cls(boxes, pvs, margin)
+
+    def _pvs_field(self) -> np.ndarray:
+        version = getattr(self.pvs, "version", 0)
+        if self._field is None or version != self._version:
+            self._field = np.asarray(self.pvs.distance_field(), dtype=float)
+            self._version = version
+        return self._field
+
+    def kernel_field(self) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+        """PVS distance field, lattice, voxel size and grid box for numba kernels (empty without a PVS)."""
+        if self.pvs is None:
+            return np.zeros((0, 0, 0)), np.zeros(3, dtype=np.int64), 1.0, np.zeros(3), np.zeros(3)
+        return (np.ascontiguousarray(self._pvs_field()), np.asarray(self.pvs.lattice, dtype=np.int64),
+                float(self.pvs.resolution), np.asarray(self.pvs.min_corner, dtype=float),
+                np.asarray(self.pvs.max_corner, dtype=float))
+
+    def clearance(self, points: Points3) -> Array:
+        """(n,) clearance of each point (< 0: collision): to the boxes minus the margin; in the PVS the
+        distance between the point's voxel centre and the nearest obstacle voxel centre minus half a
+        voxel diagonal (< 0 exactly when the point's own voxel is an obstacle). A point can be up to
+        half a diagonal nearer than that: motion bounds must subtract it."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        out = box_distance(points, self.lo, self.hi) - self.box_margin
+        if self.pvs is not None and len(points):
+            pvs = self.pvs
+            field_ = self._pvs_field()
+            ijk, inside = pvs.index(points)
+            dist = np.empty(len(points))
+            dist[inside] = field_[tuple(ijk[inside].T)] - 0.5 * math.sqrt(3.0) * pvs.resolution
+            outside = ~inside
+            if outside.any():  # any obstacle voxel lies inside the grid box
+                lo, hi = np.asarray(pvs.min_corner)[None], np.asarray(pvs.max_corner)[None]
+                dist[outside] = box_distance(points[outside], lo, hi)
+            out = np.minimum(out, dist)
+        return out
+
+# -- rollouts and Algorithm 1 ----------------------------------------------------------------
+def rollout_batch(robot: Any, start: Array, controls: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """(k, m + 1, dof) configurations of k rollouts of ``controls`` + ``eps`` (k, m, nc).
+
+    Vectorised Euler integration with the robot's drive model, identical to
+    ``robot.rollout`` for the same errors (unicycle or omnidirectional base, joints clipped).
+    """
+    controls = np.asarray(controls, dtype=float)
+    k, m = eps.shape[0], len(controls)
+    dt = float(robot.dt)
+    base = list(getattr(robot, "base_dofs", ()))
+    joints = list(robot.joint_dofs)
+    nb = int(robot.n_base_controls)
+    lower, upper = np.asarray(robot.lower)[joints], np.asarray(robot.upper)[joints]
+    configs = np.empty((k, m + 1, len(start)))
+    configs[:, 0] = start
+    for t in range(m):
+        u = controls[t][None] + eps[:, t]
+        q = configs[:, t].copy()
+        if base:
+            ix, iy, ith = base
+            th = q[:, ith]
+            c, s = np.cos(th), np.sin(th)
+            if robot.drive == "differential":
+                q[:, ix] += u[:, 0] * c * dt
+                q[:, iy] += u[:, 0] * s * dt
+                q[:, ith] += u[:, 1] * dt
+            else:
+                q[:, ix] += (c * u[:, 0] - s * u[:, 1]) * dt
+                q[:, iy] += (s * u[:, 0] + c * u[:, 1]) * dt
+                q[:, ith] += u[:, 2] * dt
+        if joints:
+            q[:, joints] = np.clip(q[:, joints] + u[:, nb:] * dt, lower, upper)
+        configs[:, t + 1] = q
+    return configs
+
+@dataclass
+class StateSamples:
+    """Sampled final states s_i of Algorithm 1, what a utility needs to score them."""
+
+    configs: np.ndarray  # (k, dof) final configurations
+    poses: np.ndarray  # (k, 4, 4) world_T_sensor at the final configurations
+    lengths: Array  # (k,) weighted length rho (Eq. 8) of each sampled trajectory
+    log_prob: Array  # (k,) log P_i = sum_t log p(eps_t) (Eq. 2-3)
+
+UtilityFn = Callable[[StateSamples], np.ndarray]  # samples -> (k,) utility g(s_i)
+
+@dataclass
+class ExpectedUtility:
+    """Result of :func:`expected_utility` (Algorithm 1)."""
+
+    value: float  # E(G_x) ~ sum_i g_i eta P_i; 0 when infeasible
+    feasible: bool
+    k: int
+    collided_sample: int | None = None
+    utilities: Array = field(default_factory=lambda: np.zeros(0))  # g_i
+    weights: Array = field(default_factory=lambda: np.zeros(0))  # eta P_i
+    mean: float = 0.0  # plain sample mean of g_i (diagnostic)
+    ess: float = 0.0  # effective sample size 1 / sum w_i^2 of the weights (k for equal weights)
+
+def plan_controls(robot: Any, plan: MotionPlan | np.ndarray) -> tuple[Array, np.ndarray]:
+    """Start state and per-``dt`` nominal controls of a plan (as ``robot.execute`` runs it)."""
+    if isinstance(plan, MotionPlan) and plan.controls is not None:
+        return np.asarray(plan.path[0], dtype=float), np.asarray(plan.controls, dtype=float)
+    path = plan.path if isinstance(plan, MotionPlan) else np.asarray(plan, dtype=float)
+    controls, _ = robot.controls_from_path(path)
+    return np.asarray(path[0], dtype=float), controls
+
+def _weighted_lengths(robot: Any, configs: np.ndarray) -> Array:
+    """Eq. 8 along each trajectory (k, m + 1, dof) -> (k,)."""
+    w = np.asarray(robot.weights, dtype=float)[: configs.shape[2]]
+    d = np.diff(configs, axis=1)
+    return np.sqrt(np.einsum("kmd,d->km", d * d, w)).sum(axis=1)
+
+def expected_utility(
+    candidate: Any,
+    utility_fn: UtilityFn,
+    robot: Any,
+    plan: MotionPlan | np.ndarray,
+    rng: np.random.Generator,
+    k: int = 100,
+    obstacles: ObstacleField | None = None,
+    weighting: str = "probability",
+) -> ExpectedUtility:
+    """Algorithm 1: expected utility of ``candidate`` reached by executing ``plan`` k times.
+
+    Every sampled rollout x_0..x_m (``rollout_batch`` with the robot's truncated noise) is
+    checked state by state against the planning obstacles; ANY colliding state of ANY sample
+    makes the candidate infeasible (value 0). Otherwise the utility g(s_i) of each sampled
+    final state is weighted by its probability P_i = prod_t p(eps_t) (Eq. 2-3):
+    E(G) = sum_i g_i eta P_i with eta = 1 / sum_i P_i (log-sum-exp). ``weighting="mean"``
+    gives every sample the weight 1/k instead (the plain Monte Carlo estimate of E(G): the
+    samples are already drawn from the noise model, so Algorithm 1's weights count their
+    probability twice). ``ess`` = 1 / sum w_i^2 says how many samples the estimate rests on:
+    log P_i sums m x (noisy controls) independent terms -e^2 / (2 sigma^2) - log Z, whose
+    spread grows like sqrt(m x controls / 2) (about 17 for 300 steps of 2 noisy controls),
+    so with the per-``dt`` noise of long plans the probability weights collapse onto a few
+    samples; the paper's control sequences (RRT edges) are short.
+
+    Collision test: when the noise moves only the planar base (the paper's setting, arm
+    sigma 0), a sample at step t is the nominal state moved by a planar rigid motion, so no
+    robot point moves more than |dc| + R_t |dtheta| (R_t: largest horizontal distance of the
+    nominal robot points from the base axis). Samples whose bound stays below the nominal
+    clearance are safe; the others are tested exactly on the moved surface points (numba,
+    :func:`explore.motion.kernels.rigid_step_hit`; the points in the base frame are sampled
+    once per arm configuration). With joint noise every sampled state is tested on its own
+    points (slow). ``obstacles`` defaults to the known environment of ``robot.sim``.
+    """
+    k = int(k)
+    if k < 1:
+        raise ValueError("k must be >= 1")
+    if weighting not in ("probability", "mean"):
+        raise ValueError(f"weighting must be 'probability' or 'mean', got {weighting!r}")
+    if obstacles is None:
+        obstacles = ObstacleField.from_sim(robot.sim) if getattr(robot, "sim", None) is not None else \
+            ObstacleField([], None)
+    start, controls = plan_controls(robot, plan)
+    sigma = np.asarray(robot.control_sigma(), dtype=float)
+    beta = float(getattr(robot, "truncation", 3.0))
+    m = len(controls)
+    eps = truncated_normal(rng, sigma, k * m, beta).reshape(k, m, len(sigma)) if m else np.zeros((k, 0, len(sigma)))
+    eps[:, :, sigma <= 0] = 0.0
+    mask = getattr(robot, "noise_mask", None)
+    active = np.ones((m, len(sigma)), dtype=bool) if mask is None else np.asarray(mask(controls), dtype=bool)
+    eps *= active[None]  # no error on the controls of parts commanded to stand still
+    log_prob = np.array([truncated_normal_logpdf(eps[i], sigma, beta, active) for i in range(k)])
+    configs = rollout_batch(robot, start, controls, eps)
+    nominal = rollout_batch(robot, start, controls, np.zeros((1, m, len(sigma))))[0]
+    base = list(getattr(robot, "base_dofs", ()))
+    joints = list(robot.joint_dofs)
+    rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
+    local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration
+    for t in range(m, 0, -1):  # collisions are likeliest late (largest drift, goal near the object)
+        if rigid:
+            key = nominal[t][joints].tobytes()
+            if key not in local_points:
+                ref = nominal[t].copy()
+                ref[base] = 0.0
+                local_points[key] = np.ascontiguousarray(robot.link_points(ref))
+            hit, n = _rigid_step_collision(configs[:, t], nominal[t], local_points[key], base, obstacles)
+        elif joints and not np.any(sigma > 0):
+            hit, n = None, 0  # noise-free: every sample is the (validated) nominal
+        else:
+            hit, n = None, 0
+            for i in range(k):
+                n += 1
+                if np.any(obstacles.clearance(robot.link_points(configs[i, t])) < 0.0):
+                    hit = i
+                    break
+        if hit is not None:
+            return ExpectedUtility(0.0, False, k, hit)
+    finals = configs[:, -1]
+    poses = np.array([robot.fk(q) for q in finals])
+    samples = StateSamples(finals, poses, _weighted_lengths(robot, configs), log_prob)
+    g = np.asarray(utility_fn(samples), dtype=float).reshape(k)
+    g = np.where(np.isfinite(g), g, 0.0)
+    if weighting == "probability":
+        weights = np.exp(log_prob - log_prob.max())
+        weights /= weights.sum()  # eta P_i
+    else:  # "mean": the plain sample mean
+        weights = np.full(k, 1.0 / k)
+    result = ExpectedUtility(float(np.sum(g * weights)), True, k, utilities=g, weights=weights,
+                             mean=float(g.mean()), ess=float(1.0 / np.sum(weights**2)))
+    if hasattr(candidate, "expected"):
+        candidate.expected = result
+    return result
+
+def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, base: list[int],
+                          obstacles: ObstacleField) -> tuple[int | None, int]:
+    """First sample (index) whose planar-moved robot hits an obstacle at one step; samples tested.
+
+    ``local``: robot points in the base frame at this step's arm configuration.
+    """
+    from explore.motion import rigid_step_hit
+
+    if len(local) == 0:
+        return None, 0
+    ix, iy, ith = base
+    field, lattice, resolution, grid_lo, grid_hi = obstacles.kernel_field()
+    hit, tested = rigid_step_hit(local, float(nominal[ix]), float(nominal[iy]), float(nominal[ith]),
+                                 np.ascontiguousarray(states[:, [ix, iy, ith]]), obstacles.lo, obstacles.hi,
+                                 obstacles.box_margin, field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution,
+                                 grid_lo, grid_hi)
+    return (None if hit < 0 else int(hit)), int(tested)

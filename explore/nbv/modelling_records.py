@@ -1,0 +1,58 @@
+"""What a modelling session records and returns: one record per scan, the result of a run, the strategy it
+resolves, and the summary of why planning failed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from explore.nbv.scan_planning import ScanPlan
+
+
+@dataclass
+class ScanRecord:
+    """What one iteration did."""
+
+    index: int
+    source: str
+    info: dict[str, Any]
+    scan_length_m: float
+    travel_m: float
+    selection_s: float
+    candidates: int
+    coverage_estimate: float
+    coverage_border: float
+    density: float
+    unknown_voxels: int
+    decision: str = ""
+    reason: str = ""
+    score: float = float("nan")
+    margin: float = float("nan")  # the chosen candidate's lead over the runner-up (explore.core.decisions)
+    termination_margin: float = float("nan")  # how far the termination rule was from its stop
+    step_s: float = 0.0
+    coverage: float = float("nan")  # ground-truth c_a, filled by metrics()
+
+@dataclass
+class ModellingResult:
+    """The outcome of :meth:`ModellingSession.run`."""
+
+    status: str
+    reason: str
+    records: list[ScanRecord]
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+def resolve_strategy(strategy: Any, registry: Any) -> Any:
+    """A :class:`explore_plugins.strategies.Strategy` from a name, (name, params) or an object."""
+    if isinstance(strategy, str):
+        return registry.create("strategy", strategy, {}, "<strategy>").strategy
+    if isinstance(strategy, tuple):
+        return registry.create("strategy", strategy[0], strategy[1], "<strategy>").strategy
+    return getattr(strategy, "strategy", strategy)
+
+def failure_summary(what: str, failures: list[ScanPlan]) -> str:
+    """``"10 candidates tried: 6 unreachable, 4 unknown"`` (the verdicts of failed plans)."""
+    counts: dict[str, int] = {}
+    for failure in failures:
+        counts[failure.verdict] = counts.get(failure.verdict, 0) + 1
+    detail = ", ".join(f"{n} {verdict}" for verdict, n in counts.items())
+    return f"{len(failures)} {what} tried: {detail}" if failures else f"no {what}"
