@@ -3,6 +3,16 @@ information-gain ray casting, and the ground-truth metrics of a model.
 """
 
 # The names other packages use (they import from the package, never from its modules).
+from explore.mapping.mesh_holes import (
+    border_edges,
+    boundary_loops,
+    coverage_area,
+    coverage_border,
+    edge_table,
+    hole_fan_area,
+    holes_of,
+    vertex_normals_of,
+)
 from explore.mapping.metrics import (
     GroundTruthMetrics,
     SelectionTimer,
@@ -14,19 +24,10 @@ from explore.mapping.metrics import (
     rms_error,
     sample_surface,
 )
-from explore.mapping.pvs import FREE, OCCUPIED, PVS, THRESHOLDS, UNKNOWN, check_grid, entropy_bits, logit
-from explore.mapping.pvs_kernels import traverse
-from explore.mapping.surface import (
-    SurfaceModel,
-    border_edges,
-    boundary_loops,
-    coverage_area,
-    coverage_border,
-    edge_table,
-    hole_fan_area,
-    holes_of,
-    vertex_normals_of,
-)
+from explore.mapping.pvs import PVS
+from explore.mapping.pvs_grid import FREE, OCCUPIED, THRESHOLDS, UNKNOWN, check_grid, entropy_bits, logit
+from explore.mapping.surface import SurfaceModel
+from explore.mapping.traversal import traverse
 from explore.mapping.visibility import (
     ACC_NAMES,
     ENTROPY,

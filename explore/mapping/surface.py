@@ -25,427 +25,33 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from explore.core import Array, Points3
+from explore.mapping.mesh_holes import (
+    Hole,
+    border_edges,
+    boundary_loops,
+    coverage_area,
+    coverage_border,
+    holes_of,
+    mesh_edge_lengths,
+    vertex_normals_of,
+)
+from explore.mapping.surface_features import SurfaceFeatures
+from explore.mapping.surface_nets import (
+    CUBE_CORNERS,
+    drop_small_components,
+    fill_small_holes,
+    manifold_part,
+    surface_nets,
+)
 from explore.sim import TriMesh
 
 if TYPE_CHECKING:
     from explore.sim import Scan
-
-__all__ = [
-    "Hole",
-    "SurfaceModel",
-    "border_edges",
-    "boundary_loops",
-    "coverage_area",
-    "coverage_border",
-    "edge_table",
-    "hole_fan_area",
-    "holes_of",
-    "mesh_edge_lengths",
-    "vertex_normals_of",
-]
-
-
-# ---------------------------------------------------------------------------------------
-# pure mesh functions (any TriMesh)
-# ---------------------------------------------------------------------------------------
-def _half_edges(triangles: np.ndarray) -> np.ndarray:
-    """Directed half-edges (3m, 2) in triangle order: (a,b), (b,c), (c,a) per triangle."""
-    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    return np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1).reshape(-1, 2)
-
-
-def edge_table(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Undirected edges of a mesh.
-
-    Returns
-    -------
-    edges : (e, 2) int64, sorted vertex pairs (lower index first)
-    counts : (e,) int64, number of triangles adjacent to each edge
-    half_to_edge : (3m,) int64, edge index of every half-edge of :func:`_half_edges`
-    """
-    half = _half_edges(triangles)
-    if len(half) == 0:
-        return np.zeros((0, 2), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
-    key = np.sort(half, axis=1)
-    edges, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return edges, counts, inverse.reshape(-1)
-
-
-def border_edges(triangles: np.ndarray, return_faces: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """Border edges (k, 2): edges with exactly one adjacent triangle (thesis Eq. 4.1).
-
-    Each is directed as in its triangle (a→b), so walking them follows the mesh boundary
-    with the surface on the left (seen from the front side). With ``return_faces`` also the
-    index (k,) of the one adjacent triangle (the side that is present, Table 4.1).
-    """
-    half = _half_edges(triangles)
-    if len(half) == 0:
-        empty = np.zeros((0, 2), np.int64)
-        return (empty, np.zeros(0, np.int64)) if return_faces else empty
-    _, counts, inverse = edge_table(triangles)
-    is_border = counts[inverse] == 1
-    if return_faces:
-        return half[is_border], np.flatnonzero(is_border) // 3
-    return half[is_border]
-
-
-def coverage_border(triangles: np.ndarray) -> float:
-    """ĉ_m = 1 − n_border / n_total over undirected edges (IROS Eq. 3); 0 for no mesh."""
-    _, counts, _ = edge_table(triangles)
-    if len(counts) == 0:
-        return 0.0
-    return float(1.0 - np.count_nonzero(counts == 1) / len(counts))
-
-
-def boundary_loops(triangles: np.ndarray, closed_only: bool = False) -> list[np.ndarray]:
-    """Boundary walks along the border edges (thesis §4.2.1/§4.4), as vertex index arrays.
-
-    Each walk follows the border half-edges in triangle direction. A walk that returns to
-    its first vertex is a closed loop (a hole; the first vertex is not repeated); a walk that
-    gets stuck (non-manifold or inconsistently oriented border) is returned open. At a
-    vertex touched by several loops (a pinch vertex) the closed walk is split into simple
-    loops. ``closed_only`` drops open walks.
-    """
-    border = border_edges(triangles)
-    if len(border) == 0:
-        return []
-    order = np.argsort(border[:, 0], kind="stable")
-    starts = border[order, 0]
-    used = np.zeros(len(border), dtype=bool)
-    loops: list[np.ndarray] = []
-
-    def outgoing(vertex: int) -> int:
-        lo, hi = np.searchsorted(starts, [vertex, vertex + 1])
-        for slot in range(lo, hi):
-            if not used[order[slot]]:
-                return int(order[slot])
-        return -1
-
-    for first in range(len(border)):
-        if used[first]:
-            continue
-        used[first] = True
-        walk = [int(border[first, 0])]
-        head = int(border[first, 1])
-        closed = False
-        while True:
-            if head == walk[0]:
-                closed = True
-                break
-            walk.append(head)
-            nxt = outgoing(head)
-            if nxt < 0:
-                break
-            used[nxt] = True
-            head = int(border[nxt, 1])
-        if closed:
-            loops.extend(_split_at_repeats(walk))
-        elif not closed_only:
-            loops.append(np.asarray(walk, dtype=np.int64))
-    return loops
-
-
-def _split_at_repeats(walk: list[int]) -> list[np.ndarray]:
-    """Split a closed walk that passes a vertex twice (pinch vertex) into simple loops."""
-    loops: list[np.ndarray] = []
-    stack: list[int] = []
-    where: dict[int, int] = {}
-    for vertex in walk:
-        if vertex in where:
-            cut = where[vertex]
-            loops.append(np.asarray(stack[cut:], dtype=np.int64))
-            for v in stack[cut + 1 :]:
-                del where[v]
-            del stack[cut + 1 :]
-        else:
-            where[vertex] = len(stack)
-            stack.append(vertex)
-    loops.append(np.asarray(stack, dtype=np.int64))
-    return [loop for loop in loops if len(loop) >= 3]
-
-
-def hole_fan_area(vertices: Points3, loop: np.ndarray) -> float:
-    """Area of the fan from the loop centre c_h: ½ Σ‖(v_{i−1} − c_h) × (v_i − c_h)‖ (Eq. 4.37)."""
-    ring = np.asarray(vertices)[np.asarray(loop)]
-    if len(ring) < 3:
-        return 0.0
-    centre = ring.mean(axis=0)
-    a = ring - centre
-    b = np.roll(a, -1, axis=0)
-    return float(0.5 * np.linalg.norm(np.cross(a, b), axis=1).sum())
-
-
-def _triangle_areas(vertices: Points3, triangles: np.ndarray) -> Array:
-    if len(triangles) == 0:
-        return np.zeros(0)
-    a, b, c = (vertices[triangles[:, i]] for i in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-
-def vertex_normals_of(vertices: Points3, triangles: np.ndarray) -> Points3:
-    """Area-weighted unit vertex normals (zero for unreferenced vertices)."""
-    normals = np.zeros((len(vertices), 3))
-    if len(triangles):
-        a, b, c = (vertices[triangles[:, i]] for i in range(3))
-        face = np.cross(b - a, c - a)
-        for i in range(3):
-            for axis in range(3):
-                normals[:, axis] += np.bincount(triangles[:, i], face[:, axis], minlength=len(vertices))
-    norm = np.linalg.norm(normals, axis=1, keepdims=True)
-    return np.divide(normals, norm, out=np.zeros_like(normals), where=norm > 0)
-
-
-def mesh_edge_lengths(vertices: Points3, triangles: np.ndarray) -> Array:
-    """Lengths of the undirected edges of a mesh."""
-    edges, _, _ = edge_table(triangles)
-    return np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-
-
-@dataclass(frozen=True)
-class Hole:
-    """A closed boundary loop (thesis §4.4).
-
-    Attributes
-    ----------
-    loop : (k,) int, vertex indices in walking order
-    centre : (3,) c_h, mean of the loop vertices
-    normal : (3,) n_h, PCA plane normal of the loop vertices (Eq. 4.19–4.21 applied to
-        positions), oriented out of the object (towards where a sensor should look from)
-    perimeter : float, loop length (m)
-    area : float, fan area A_hole (Eq. 4.37, m²)
-    far_vertex : (3,) v_max, loop vertex farthest from c_h (hole direction d_h, Eq. 4.22)
-    radius : float, ‖v_max − c_h‖
-    """
-
-    loop: np.ndarray
-    centre: np.ndarray
-    normal: np.ndarray
-    perimeter: float
-    area: float
-    far_vertex: np.ndarray
-    radius: float
-
-    @property
-    def size(self) -> int:
-        """Number of border edges |E_H| of the loop."""
-        return len(self.loop)
-
-
-def _hole(vertices: Points3, loop: np.ndarray, normals: Points3 | None) -> Hole:
-    ring = vertices[loop]
-    centre = ring.mean(axis=0)
-    centred = ring - centre
-    _, vectors = np.linalg.eigh(centred.T @ centred / len(ring))
-    normal = vectors[:, 0]
-    # the loop runs with the surface on its left, so its vector area points into the object
-    vector_area = 0.5 * np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
-    sign = -float(normal @ vector_area)
-    if abs(sign) < 1e-12 and normals is not None:
-        sign = float(normal @ normals[loop].sum(axis=0))
-    if sign < 0:
-        normal = -normal
-    distance = np.linalg.norm(centred, axis=1)
-    far = int(np.argmax(distance))
-    perimeter = float(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1).sum())
-    return Hole(
-        loop=loop,
-        centre=centre,
-        normal=normal,
-        perimeter=perimeter,
-        area=hole_fan_area(vertices, loop),
-        far_vertex=ring[far].copy(),
-        radius=float(distance[far]),
-    )
-
-
-def holes_of(
-    vertices: Points3,
-    triangles: np.ndarray,
-    max_perimeter: float | None = None,
-    min_edges: int = 3,
-    max_edges: int | None = None,
-    normals: Points3 | None = None,
-) -> list[Hole]:
-    """Closed boundary loops of a mesh as :class:`Hole` (h_min ≤ |E_H| ≤ h_max, §4.4)."""
-    vertices = np.asarray(vertices, dtype=float)
-    out = []
-    for loop in boundary_loops(triangles, closed_only=True):
-        if len(loop) < min_edges or (max_edges is not None and len(loop) > max_edges):
-            continue
-        hole = _hole(vertices, loop, normals)
-        if max_perimeter is None or hole.perimeter <= max_perimeter:
-            out.append(hole)
-    return out
-
-
-def coverage_area(vertices: Points3, triangles: np.ndarray, max_perimeter: float | None = None) -> float:
-    """ĉ_m = A_filled / (A_filled + A_empty) with A_empty = Σ hole fans (Eq. 4.35–4.37).
-
-    Every closed border loop counts as a hole (the opening at the support too, so 100 % is
-    out of reach for an object on a table); ``max_perimeter`` ignores larger loops.
-    """
-    vertices = np.asarray(vertices, dtype=float)
-    filled = float(_triangle_areas(vertices, np.asarray(triangles)).sum())
-    if filled <= 0.0:
-        return 0.0
-    empty = sum(h.area for h in holes_of(vertices, triangles, max_perimeter=max_perimeter))
-    return filled / (filled + empty)
-
-
-# ---------------------------------------------------------------------------------------
-# surface nets on a signed distance grid
-# ---------------------------------------------------------------------------------------
-_CUBE_CORNERS = np.array([[(c >> 0) & 1, (c >> 1) & 1, (c >> 2) & 1] for c in range(8)])
-_CUBE_EDGES = np.array(
-    [(a, b) for a in range(8) for b in range(a + 1, 8) if np.abs(_CUBE_CORNERS[a] - _CUBE_CORNERS[b]).sum() == 1]
-)
-
-
-def surface_nets(sdf: np.ndarray, valid: np.ndarray) -> tuple[Points3, np.ndarray]:
-    """Naive surface nets of the zero level of ``sdf`` (negative inside) where ``valid``.
-
-    Returns vertices in grid-index coordinates (float) and triangles oriented with their
-    normal towards positive ``sdf``. A cube makes a vertex only if its 8 corners are valid;
-    a grid edge with a sign change makes a quad only if its 4 cubes have vertices.
-    """
-    shape = np.array(sdf.shape)
-    if np.any(shape < 2):
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    inside = sdf < 0
-    cs = tuple(shape - 1)
-    all_valid = np.ones(cs, dtype=bool)
-    any_in = np.zeros(cs, dtype=bool)
-    all_in = np.ones(cs, dtype=bool)
-    for dx, dy, dz in _CUBE_CORNERS:
-        sl = (slice(dx, dx + cs[0]), slice(dy, dy + cs[1]), slice(dz, dz + cs[2]))
-        all_valid &= valid[sl]
-        any_in |= inside[sl]
-        all_in &= inside[sl]
-    active = all_valid & any_in & ~all_in
-    cubes = np.argwhere(active)
-    if len(cubes) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    corner_idx = cubes[:, None, :] + _CUBE_CORNERS[None]  # (n, 8, 3)
-    values = sdf[corner_idx[..., 0], corner_idx[..., 1], corner_idx[..., 2]].astype(np.float64)
-    va, vb = values[:, _CUBE_EDGES[:, 0]], values[:, _CUBE_EDGES[:, 1]]  # (n, 12)
-    crossing = (va < 0) != (vb < 0)
-    t = np.where(crossing, va / np.where(crossing, va - vb, 1.0), 0.0)
-    pa = _CUBE_CORNERS[_CUBE_EDGES[:, 0]].astype(float)  # (12, 3)
-    pb = _CUBE_CORNERS[_CUBE_EDGES[:, 1]].astype(float)
-    points = pa[None] + t[..., None] * (pb - pa)[None]  # (n, 12, 3)
-    count = crossing.sum(axis=1)
-    local = (points * crossing[..., None]).sum(axis=1) / count[:, None]
-    vertices = cubes + local
-    cube_id = np.full(cs, -1, dtype=np.int64)
-    cube_id[cubes[:, 0], cubes[:, 1], cubes[:, 2]] = np.arange(len(cubes))
-
-    quads = []
-    for axis in range(3):
-        u, v = (axis + 1) % 3, (axis + 2) % 3  # u × v = axis
-        lo = [slice(None)] * 3
-        hi = [slice(None)] * 3
-        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-        change = (inside[tuple(lo)] != inside[tuple(hi)]) & valid[tuple(lo)] & valid[tuple(hi)]
-        # the four cubes around an edge need u-1 and v-1 >= 0 and u, v < cs
-        change[tuple(slice(0, 1) if d == u else slice(None) for d in range(3))] = False
-        change[tuple(slice(0, 1) if d == v else slice(None) for d in range(3))] = False
-        nodes = np.argwhere(change)
-        keep = (nodes[:, u] < cs[u]) & (nodes[:, v] < cs[v])
-        nodes = nodes[keep]
-        if len(nodes) == 0:
-            continue
-        corners = []
-        for du, dv in ((-1, -1), (0, -1), (0, 0), (-1, 0)):  # counter-clockwise in (u, v)
-            c = nodes.copy()
-            c[:, u] += du
-            c[:, v] += dv
-            corners.append(cube_id[c[:, 0], c[:, 1], c[:, 2]])
-        quad = np.stack(corners, axis=1)
-        complete = np.all(quad >= 0, axis=1)
-        quad, nodes = quad[complete], nodes[complete]
-        nodes_in = inside[nodes[:, 0], nodes[:, 1], nodes[:, 2]]
-        # inside at the lower node -> outward normal along +axis -> keep CCW order
-        quad = np.where(nodes_in[:, None], quad, quad[:, ::-1])
-        quads.append(quad)
-    if not quads:
-        return vertices, np.zeros((0, 3), np.int64)
-    quad = np.vstack(quads)
-    p = vertices[quad]
-    d02 = np.sum((p[:, 0] - p[:, 2]) ** 2, axis=1)
-    d13 = np.sum((p[:, 1] - p[:, 3]) ** 2, axis=1)
-    split02 = d02 <= d13
-    tri_a = np.where(split02[:, None], quad[:, [0, 1, 2]], quad[:, [0, 1, 3]])
-    tri_b = np.where(split02[:, None], quad[:, [0, 2, 3]], quad[:, [1, 2, 3]])
-    return vertices, np.vstack([tri_a, tri_b])
-
-
-def manifold_part(triangles: np.ndarray) -> np.ndarray:
-    """Drop triangles at non-manifold edges (> 2 triangles) or at edges whose two triangles
-    disagree in orientation, so every border vertex has as many in- as outgoing border
-    edges and boundary walks close."""
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    if len(triangles) == 0:
-        return triangles
-    half = _half_edges(triangles)
-    _, counts, inverse = edge_table(triangles)
-    forward = (half[:, 0] < half[:, 1]).astype(np.int64)
-    n_forward = np.bincount(inverse, forward, len(counts))
-    bad_edge = (counts > 2) | ((counts == 2) & (n_forward != 1))
-    bad_triangle = bad_edge[inverse].reshape(-1, 3).any(axis=1)
-    return triangles[~bad_triangle]
-
-
-def fill_small_holes(triangles: np.ndarray, max_edges: int) -> np.ndarray:
-    """Close boundary loops of at most ``max_edges`` edges with a fan (extraction artifacts
-    below the grid resolution); fills that would make an edge non-manifold are skipped."""
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    if max_edges < 3 or len(triangles) == 0:
-        return triangles
-    fills = []
-    for loop in boundary_loops(triangles, closed_only=True):
-        if 3 <= len(loop) <= max_edges:
-            i = np.arange(1, len(loop) - 1)
-            fills.append(np.column_stack([np.full(len(i), loop[0]), loop[i + 1], loop[i]]))
-    if not fills:
-        return triangles
-    fill = np.vstack(fills)
-    merged = np.vstack([triangles, fill])
-    kept = manifold_part(merged)
-    if len(kept) == len(merged):
-        return merged
-    # keep the original triangles and only the fills that stay manifold
-    _, counts, inverse = edge_table(merged)
-    bad_triangle = (counts[inverse] > 2).reshape(-1, 3).any(axis=1)
-    bad_triangle[: len(triangles)] = False
-    return manifold_part(merged[~bad_triangle])
-
-
-def _drop_small_components(vertices: Points3, triangles: np.ndarray, min_triangles: int) -> tuple[Points3, np.ndarray]:
-    """Remove connected components with fewer than ``min_triangles`` and unused vertices."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    if len(triangles) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    if min_triangles > 1:
-        n = len(vertices)
-        rows = np.concatenate([triangles[:, 0], triangles[:, 1]])
-        cols = np.concatenate([triangles[:, 1], triangles[:, 2]])
-        graph = coo_matrix((np.ones(len(rows), dtype=np.int8), (rows, cols)), shape=(n, n))
-        _, label = connected_components(graph, directed=False)
-        tri_label = label[triangles[:, 0]]
-        size = np.bincount(tri_label, minlength=label.max() + 1)
-        triangles = triangles[size[tri_label] >= min_triangles]
-    used = np.zeros(len(vertices), dtype=bool)
-    used[triangles.reshape(-1)] = True
-    remap = np.cumsum(used) - 1
-    return vertices[used], remap[triangles]
 
 
 # ---------------------------------------------------------------------------------------
@@ -460,7 +66,7 @@ class _Cache:
     extra: dict[str, object] = field(default_factory=dict)
 
 
-class SurfaceModel:
+class SurfaceModel(SurfaceFeatures):
     """Triangle mesh of the region of interest, built incrementally from scans.
 
     Parameters
@@ -648,7 +254,7 @@ class SurfaceModel:
         grid = (samples - self.grid_origin) / self.voxel_size
         if self.splat:  # the 8 nodes around every sample, so no node next to a beam is missed
             base = np.floor(grid).astype(np.int64).reshape(-1, 1, 3)
-            node = (base + _CUBE_CORNERS[None]).reshape(-1, 3)
+            node = (base + CUBE_CORNERS[None]).reshape(-1, 3)
             per_beam = len(offsets) * 8
         else:
             node = np.rint(grid).astype(np.int64).reshape(-1, 3)
@@ -704,10 +310,10 @@ class SurfaceModel:
         sdf = np.divide(self._sdf_sum, weight, out=np.zeros_like(self._sdf_sum), where=weight > 0)
         vertices, triangles = surface_nets(sdf, valid)
         triangles = fill_small_holes(manifold_part(triangles), self.fill_max_edges)
-        vertices, triangles = _drop_small_components(vertices, triangles, self.min_component)
+        vertices, triangles = drop_small_components(vertices, triangles, self.min_component)
         grid_index = np.clip(np.floor(vertices).astype(np.int64), 0, np.array(self.grid_shape) - 2)
         stamp = np.full(len(vertices), -1, dtype=np.int64)
-        for dx, dy, dz in _CUBE_CORNERS:
+        for dx, dy, dz in CUBE_CORNERS:
             stamp = np.maximum(stamp, self._stamp[grid_index[:, 0] + dx, grid_index[:, 1] + dy, grid_index[:, 2] + dz])
         world = self.grid_origin + vertices * self.voxel_size
         self._cache.mesh = TriMesh(world, triangles.astype(np.int32))
@@ -797,100 +403,4 @@ class SurfaceModel:
         """N_max = √2 π R_n² / R_r², points of a close-packed R_n disc (Eq. 4.25)."""
         return float(np.sqrt(2.0) * np.pi * self.normal_radius**2 / self.point_spacing**2)
 
-    def vertex_features(self) -> dict[str, np.ndarray]:
-        """Per-vertex features: ``density`` d(v_j) = N_act/N_max ∈ [0, 1] (Eq. 4.24–4.25),
-        ``border`` = share of border edges among the vertex's edges (Eq. 4.28 per vertex),
-        ``normal`` = unit vertex normal; plus ``n_edges`` and ``n_border`` (edge counts)."""
-        if self._cache.features is not None:
-            return self._cache.features
-        mesh = self.mesh
-        n = len(mesh.vertices)
-        density = np.zeros(n)
-        if n and len(self._keys):
-            from scipy.spatial import cKDTree
 
-            tree = cKDTree(self.points)
-            count = tree.query_ball_point(mesh.vertices, self.normal_radius, return_length=True)
-            density = np.minimum(np.asarray(count, dtype=float) / self.n_max, 1.0)
-        edges, counts, _ = edge_table(mesh.triangles)
-        n_edges = np.bincount(edges.reshape(-1), minlength=n).astype(float)
-        is_border = np.repeat(counts == 1, 2)
-        n_border = np.bincount(edges.reshape(-1)[is_border], minlength=n).astype(float)
-        border = np.divide(n_border, n_edges, out=np.zeros(n), where=n_edges > 0)
-        self._cache.features = {
-            "density": density,
-            "border": border,
-            "normal": self.vertex_normals,
-            "n_edges": n_edges,
-            "n_border": n_border,
-        }
-        return self._cache.features
-
-    def mean_density(self) -> float:
-        """d̄_m: mean relative point density over all mesh vertices (Eq. 4.24–4.26)."""
-        density = self.vertex_features()["density"]
-        return float(density.mean()) if len(density) else 0.0
-
-    def voxel_features(
-        self, resolution: float, origin: Array | None = None
-    ) -> tuple[np.ndarray, Array, Points3, Array]:
-        """Features averaged per voxel of edge ``resolution`` (voxel = floor((v − origin)/res)).
-
-        Returns ``voxel_index`` (k, 3) int, ``density`` d̄_i (k,) (Eq. 4.26), ``normal`` n̄_i
-        (k, 3) (Eq. 4.27, re-normalised to unit length) and ``border`` b_i =
-        N_border/N_total (k,) (Eq. 4.28; each edge counted at both of its end vertices).
-        """
-        origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=float)
-        mesh = self.mesh
-        if len(mesh.vertices) == 0:
-            return np.zeros((0, 3), np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0)
-        feats = self.vertex_features()
-        index = np.floor((mesh.vertices - origin) / resolution).astype(np.int64)
-        voxels, inverse, count = np.unique(index, axis=0, return_inverse=True, return_counts=True)
-        inverse = inverse.reshape(-1)
-        k = len(voxels)
-        density = np.bincount(inverse, feats["density"], k) / count
-        normal = np.column_stack([np.bincount(inverse, feats["normal"][:, a], k) for a in range(3)]) / count[:, None]
-        norm = np.linalg.norm(normal, axis=1, keepdims=True)
-        normal = np.divide(normal, norm, out=np.zeros_like(normal), where=norm > 0)
-        n_edges = np.bincount(inverse, feats["n_edges"], k)
-        n_border = np.bincount(inverse, feats["n_border"], k)
-        border = np.divide(n_border, n_edges, out=np.zeros(k), where=n_edges > 0)
-        return voxels, density, normal, border
-
-    # -- export --------------------------------------------------------------------------
-    def summary(self) -> dict:
-        """Counts and completeness numbers of the current model."""
-        mesh = self.mesh
-        return {
-            "points": len(self),
-            "vertices": int(len(mesh.vertices)),
-            "triangles": int(len(mesh.triangles)),
-            "border_edges": int(len(self.border_edges())),
-            "coverage_border": self.coverage_border(),
-            "coverage_area": self.coverage_area(),
-            "mean_density": self.mean_density(),
-            "mean_edge_length": self.mean_edge_length(),
-        }
-
-    def save_ply(self, path: str | Path) -> None:
-        """Write the mesh with vertex normals as PLY."""
-        import open3d as o3d
-
-        mesh = o3d.geometry.TriangleMesh(
-            o3d.utility.Vector3dVector(self.mesh.vertices), o3d.utility.Vector3iVector(self.mesh.triangles)
-        )
-        mesh.vertex_normals = o3d.utility.Vector3dVector(self.vertex_normals)
-        if not o3d.io.write_triangle_mesh(str(path), mesh):
-            raise OSError(f"could not write {path}")
-
-    def save_png(self, path: str | Path, title: str = "") -> None:
-        """Shaded snapshot of the mesh."""
-        from explore.core import save_mesh_png
-
-        mesh = self.mesh
-        text = title or (
-            f"{len(mesh.triangles)} triangles, ĉ_m = {self.coverage_area():.3f} (area), "
-            f"{self.coverage_border():.3f} (border)"
-        )
-        save_mesh_png(mesh.vertices, mesh.triangles, path, text)

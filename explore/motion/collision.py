@@ -5,12 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:
-    pass
 
 
 # -- pybullet collision checking ---------------------------------------------------------------
@@ -21,6 +17,7 @@ class Part:
     body: int
     link: int
     name: str = ""
+
 
 class BulletCollider:
     """Collision tests of robot parts vs obstacle bodies and of self-collision link pairs.
@@ -100,6 +97,7 @@ class BulletCollider:
                     hits.append(-1)
                     break
         return hits
+
 
 def self_collision_pairs(
     client: int, parts: Sequence[Part], adjacent: Callable[[Part, Part], bool], tolerance: float = 0.0

@@ -5,7 +5,7 @@ simplification, the PRM family driven in the calling thread, and the straight li
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -13,10 +13,6 @@ from explore.core import Array
 from explore.motion.planning_clock import Budget
 from explore.motion.problem import MotionProblem, check_path_until, path_length
 from explore.motion.records import MotionPlan
-
-if TYPE_CHECKING:
-    pass
-
 
 # OMPL geometric planners by plugin name (any other og.* class is also accepted by its name)
 GEOMETRIC_PLANNERS: dict[str, str] = {
@@ -40,6 +36,7 @@ GEOMETRIC_PLANNERS: dict[str, str] = {
 # they are offered only when ``ompl.geometric`` has the class, never replaced by another one.
 OPTIONAL_GEOMETRIC: dict[str, str] = {"lazy_prm": "LazyPRM", "lazy_prm_star": "LazyPRMstar"}
 
+
 # -- OMPL ------------------------------------------------------------------------------------
 def ompl_modules() -> tuple[Any, Any, Any]:
     from ompl import base as ob
@@ -48,6 +45,7 @@ def ompl_modules() -> tuple[Any, Any, Any]:
 
     ou.setLogLevel(ou.LOG_ERROR)
     return ob, og, ou
+
 
 def seed_ompl(seed: int | None) -> None:
     """Seed OMPL's global seed generator (deterministic planning for a given seed)."""
@@ -59,6 +57,7 @@ def seed_ompl(seed: int | None) -> None:
     ou.RNG.setSeed(max(1, int(seed)))
     ou.setLogLevel(level)
 
+
 def real_vector_space(ob: Any, lower: Array, upper: Array) -> Any:
     space = ob.RealVectorStateSpace(len(lower))
     bounds = ob.RealVectorBounds(len(lower))
@@ -68,16 +67,19 @@ def real_vector_space(ob: Any, lower: Array, upper: Array) -> Any:
     space.setBounds(bounds)
     return space
 
+
 def ompl_state(space: Any, q: Array) -> Any:
     state = space.allocState()
     for i, v in enumerate(q):
         state[i] = float(v)
     return state
 
+
 def geometric_planner_names() -> list[str]:
     """The ``ompl.geometric`` planner classes this OMPL build offers (for lookups by name)."""
     ob, og, _ = ompl_modules()
     return sorted(n for n in dir(og) if isinstance(getattr(og, n), type) and issubclass(getattr(og, n), ob.Planner))
+
 
 def planner_class(name: str) -> Any:
     """The OMPL geometric planner class for a plugin name or an ``og`` class name.
@@ -94,6 +96,7 @@ def planner_class(name: str) -> Any:
     return getattr(og, cls_name)
 
 SOLVE_SHARE = 0.5  # share of the remaining time a coarse search may use (the rest re-checks or retries)
+
 
 def plan(
     problem: MotionProblem,
@@ -157,6 +160,7 @@ def plan(
                           length=path_length(problem.robot, problem.motion_path(path)))
     return None
 
+
 def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int, budget: Budget | None) -> Any:
     """OMPL motion validator that checks the motion the robot executes (turn-drive-turn).
 
@@ -174,6 +178,7 @@ def _executed_motion_validator(si: Any, problem: Any, resolution: float, n: int,
             return bool(check_path_until(problem, path, budget, resolution, margin=None))
 
     return Validator(si)
+
 
 def ompl_search(
     problem: MotionProblem,
@@ -231,6 +236,7 @@ def ompl_search(
 
 ROADMAP_ROUND = 0.02  # planning-clock seconds of roadmap growth between two solution checks (expansion: half)
 
+
 def _solve_roadmap(ss: Any, prm: Any, search: Budget) -> bool:
     """PRM / PRM* without OMPL's second thread: True when the roadmap joins start and goal.
 
@@ -259,6 +265,7 @@ def _solve_roadmap(ss: Any, prm: Any, search: Budget) -> bool:
         round_ = search.slice(ROADMAP_ROUND if grow else 0.5 * ROADMAP_ROUND)
         (prm.growRoadmapPtc if grow else prm.expandRoadmapPtc)(round_.ompl_condition())
         grow = not grow
+
 
 def straight_line(
     problem: MotionProblem, start: Array, goal: Array, budget: Budget | None = None

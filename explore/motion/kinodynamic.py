@@ -3,7 +3,7 @@ velocity controls held for dt, propagated by the robot's own model."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -14,11 +14,8 @@ from explore.motion.planning_clock import Budget
 from explore.motion.problem import MotionProblem, check_path_until
 from explore.motion.records import MotionPlan
 
-if TYPE_CHECKING:
-    pass
-
-
 CONTROL_PLANNERS: dict[str, str] = {"rrt": "RRT", "kpiece": "KPIECE1", "sst": "SST", "est": "EST", "pdst": "PDST"}
+
 
 def plan_kinodynamic(
     problem: MotionProblem,
@@ -130,6 +127,7 @@ def plan_kinodynamic(
 
     return mobile_plan(problem, start, goal, drive, time_limit, seed, tuck, f"kinodynamic_{planner}")
 
+
 def control_planner_class(name: str) -> Any:
     """The ``ompl.control`` planner class for a plugin name (only classes the bindings can build)."""
     available = control_planner_names()
@@ -140,6 +138,7 @@ def control_planner_class(name: str) -> Any:
     from ompl import control as oc
 
     return getattr(oc, cls_name)
+
 
 def control_planner_names() -> dict[str, str]:
     """Plugin name -> ``ompl.control`` class of the control planners this OMPL can construct."""

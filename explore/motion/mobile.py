@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,9 +14,6 @@ from explore.motion.geometric import ompl_search, plan, seed_ompl
 from explore.motion.planning_clock import Budget, charge
 from explore.motion.problem import MotionProblem, check_path_until, path_length
 from explore.motion.records import MotionPlan
-
-if TYPE_CHECKING:
-    pass
 
 
 def box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
@@ -32,6 +28,7 @@ def box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
     outside = np.sqrt(np.einsum("nbk,nbk->nb", gap, gap))
     depth = np.minimum(-below, -above).min(axis=2)  # > 0 inside
     return np.where(outside > 0.0, outside, -np.maximum(depth, 0.0)).min(axis=1)
+
 
 class PlanarChecker:
     """Validity of base poses (x, y, theta) with every other joint fixed at ``q_ref``.
@@ -124,6 +121,7 @@ class PlanarChecker:
             return True
         return self.problem.is_valid(self.full(qb))
 
+
 class BaseProblem:
     """The base (x, y, theta) part of a problem with the other joints carried fixed.
 
@@ -152,6 +150,7 @@ class BaseProblem:
     def motion_path(self, path: np.ndarray) -> np.ndarray:
         return self.problem.motion_path(self.full_path(np.asarray(path, dtype=float)))[:, self.base]
 
+
 def _joint_motion(problem: MotionProblem, a: Array, b: Array, budget: Budget, seed: int | None) -> np.ndarray | None:
     """Path moving only the non-base joints from ``a`` to ``b`` (straight if valid, else RRT-Connect).
 
@@ -179,6 +178,7 @@ def _joint_motion(problem: MotionProblem, a: Array, b: Array, budget: Budget, se
         problem.motions[key] = path
     return path
 
+
 def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: bool) -> list[Array]:
     """Joint values to drive with, best first: the robot's ``travel_joints`` (with ``tuck``),
     the start's, the goal's; each valid at the start and at the goal base pose."""
@@ -199,6 +199,7 @@ def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: boo
         if problem.is_valid(a) and problem.is_valid(b):
             out.append(values)
     return out
+
 
 def mobile_plan(
     problem: MotionProblem,
@@ -272,6 +273,7 @@ def mobile_plan(
         return MotionPlan(path, controls=np.vstack(control_pieces), dt=float(robot.dt), planner=name,
                           planning_time=time.perf_counter() - t0, exact=exact, length=path_length(robot, path))
     return None
+
 
 def plan_mobile(
     problem: MotionProblem,

@@ -4,14 +4,10 @@ normal errors truncated at beta = 3 sigma, and the log of their transition densi
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from explore.core import Array
-
-if TYPE_CHECKING:
-    pass
 
 
 # -- noise model (Vasquez-Gomez Sec. A6) -----------------------------------------------------
@@ -24,6 +20,7 @@ def truncated_normal(rng: np.random.Generator, sigma: Array, size: int, beta: fl
         out[bad] = rng.normal(size=int(bad.sum())) * np.broadcast_to(sigma, out.shape)[bad]
         bad = np.abs(out) > beta * sigma
     return out
+
 
 def truncated_normal_logpdf(eps: np.ndarray, sigma: Array, beta: float = 3.0,
                             active: np.ndarray | None = None) -> float:

@@ -21,6 +21,7 @@ SpaceFree = Callable[[np.ndarray], np.ndarray]  # points (n, 3) -> bool (n,) fre
 
 Probability = Callable[[np.ndarray], np.ndarray]  # points (n, 3) -> occupancy (n,)
 
+
 # -- the planning problem ----------------------------------------------------------------------
 class MotionProblem:
     """A robot, its validity checker (known environment + optional free-space test), bounds.
@@ -117,12 +118,14 @@ class MotionProblem:
         expand = getattr(self.robot, "execution_path", None)
         return np.asarray(path, dtype=float) if expand is None else np.asarray(expand(path), dtype=float)
 
+
 def _free_outside_box(space_free: SpaceFree | None) -> tuple[Array, Array] | None:
     """The grid box of ``pvs.is_free`` (which calls every point outside its grid free), else None."""
     owner = getattr(space_free, "__self__", None)
     if getattr(space_free, "__name__", "") == "is_free" and hasattr(owner, "min_corner"):
         return np.asarray(owner.min_corner, dtype=float), np.asarray(owner.max_corner, dtype=float)
     return None
+
 
 def _interpolate(path: np.ndarray, resolution: float) -> np.ndarray:
     """Dense configurations along a piecewise-linear path, at most ``resolution`` apart."""
@@ -133,6 +136,7 @@ def _interpolate(path: np.ndarray, resolution: float) -> np.ndarray:
         s = np.linspace(0.0, 1.0, n + 1)[1:, None]
         pieces.append(a + s * (b - a))
     return np.vstack(pieces)
+
 
 def validate_path(
     problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
@@ -148,6 +152,7 @@ def validate_path(
         if not problem.is_valid(q, margin=margin):
             return index
     return None
+
 
 def _bisection_order(n: int) -> list[int]:
     """Indices 0..n-1, ends first, then midpoints (van der Corput, as OMPL's DiscreteMotionValidator)."""
@@ -166,12 +171,14 @@ def _bisection_order(n: int) -> list[int]:
     order.extend(i for i in range(n) if i not in seen)
     return order
 
+
 def path_is_valid(
     problem: MotionProblem, path: np.ndarray, resolution: float | None = None, margin: float | None = 0.0
 ) -> bool:
     """Same test as ``validate_path(...) is None`` but in bisection order: an invalid path is
     usually rejected after a few checks."""
     return bool(check_path_until(problem, path, None, resolution, margin))
+
 
 def check_path_until(
     problem: MotionProblem,
@@ -191,6 +198,7 @@ def check_path_until(
         if not problem.is_valid(dense[i], margin=margin):
             return False
     return True
+
 
 def path_length(robot: Robot, path: np.ndarray) -> float:
     """Weighted path length rho (Vasquez-Gomez Eq. 8)."""

@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from explore.core import Array, Pose
-
-if TYPE_CHECKING:
-    pass
 
 
 # -- records ---------------------------------------------------------------------------------
@@ -22,6 +18,7 @@ class CollisionEvent:
     time: float
     config: Array
     bodies: tuple[str, ...]
+
 
 @dataclass
 class MotionPlan:
@@ -46,6 +43,7 @@ class MotionPlan:
     @property
     def goal(self) -> Array:
         return self.path[-1]
+
 
 @dataclass
 class Execution:

@@ -35,6 +35,7 @@ class ScanPathIK:
     def fraction(self) -> float:
         return self.reachable / max(1, len(self.poses))
 
+
 def scan_path_poses(path: ScanPath, step: float = 0.01) -> np.ndarray:
     """Sensor poses every ``step`` metres along the path (orientation of the start kept)."""
     count = max(2, int(math.ceil(path.length / step)) + 1)
@@ -42,6 +43,7 @@ def scan_path_poses(path: ScanPath, step: float = 0.01) -> np.ndarray:
     poses = np.repeat(path.start[None], count, axis=0)
     poses[:, :3, 3] = path.start[:3, 3] + s[:, None] * (path.end[:3, 3] - path.start[:3, 3])
     return poses
+
 
 def linear_scan_path_ik(
     robot: Robot,
@@ -86,12 +88,14 @@ def linear_scan_path_ik(
     stacked = np.asarray(configs) if configs else np.zeros((0, robot.dof))
     return ScanPathIK(stacked, poses, len(configs))
 
+
 def _point_segment_distance(x: Array, a: Array, b: Array) -> float:
     ab = b - a
     t = 0.0 if float(ab @ ab) < 1e-18 else float(np.clip((x - a) @ ab / (ab @ ab), 0.0, 1.0))
     return float(np.linalg.norm(x - (a + t * ab)))
 
 BLOCK_FREE, BLOCK_UNKNOWN, BLOCK_OCCUPIED = "free", "unknown", "occupied"
+
 
 def classify_blocked(
     robot: Robot,

@@ -40,6 +40,7 @@ def samples_needed(alpha: float, eta: float, gamma: float) -> int:
         return 1
     return max(1, int(math.ceil(math.log(alpha) / math.log(miss) - 1e-12)))
 
+
 # -- obstacles as seen by the planner -------------------------------------------------------
 class ObstacleField:
     """Clearance of points from the planning obstacles O = W_obj u W_unk u O_env (Sec. A1).
@@ -106,6 +107,7 @@ class ObstacleField:
             out = np.minimum(out, dist)
         return out
 
+
 # -- rollouts and Algorithm 1 ----------------------------------------------------------------
 def rollout_batch(robot: Any, start: Array, controls: np.ndarray, eps: np.ndarray) -> np.ndarray:
     """(k, m + 1, dof) configurations of k rollouts of ``controls`` + ``eps`` (k, m, nc).
@@ -142,6 +144,7 @@ def rollout_batch(robot: Any, start: Array, controls: np.ndarray, eps: np.ndarra
         configs[:, t + 1] = q
     return configs
 
+
 @dataclass
 class StateSamples:
     """Sampled final states s_i of Algorithm 1, what a utility needs to score them."""
@@ -152,6 +155,7 @@ class StateSamples:
     log_prob: Array  # (k,) log P_i = sum_t log p(eps_t) (Eq. 2-3)
 
 UtilityFn = Callable[[StateSamples], np.ndarray]  # samples -> (k,) utility g(s_i)
+
 
 @dataclass
 class ExpectedUtility:
@@ -166,6 +170,7 @@ class ExpectedUtility:
     mean: float = 0.0  # plain sample mean of g_i (diagnostic)
     ess: float = 0.0  # effective sample size 1 / sum w_i^2 of the weights (k for equal weights)
 
+
 def plan_controls(robot: Any, plan: MotionPlan | np.ndarray) -> tuple[Array, np.ndarray]:
     """Start state and per-``dt`` nominal controls of a plan (as ``robot.execute`` runs it)."""
     if isinstance(plan, MotionPlan) and plan.controls is not None:
@@ -174,11 +179,13 @@ def plan_controls(robot: Any, plan: MotionPlan | np.ndarray) -> tuple[Array, np.
     controls, _ = robot.controls_from_path(path)
     return np.asarray(path[0], dtype=float), controls
 
+
 def _weighted_lengths(robot: Any, configs: np.ndarray) -> Array:
     """Eq. 8 along each trajectory (k, m + 1, dof) -> (k,)."""
     w = np.asarray(robot.weights, dtype=float)[: configs.shape[2]]
     d = np.diff(configs, axis=1)
     return np.sqrt(np.einsum("kmd,d->km", d * d, w)).sum(axis=1)
+
 
 def expected_utility(
     candidate: Any,
@@ -272,6 +279,7 @@ def expected_utility(
     if hasattr(candidate, "expected"):
         candidate.expected = result
     return result
+
 
 def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, base: list[int],
                           obstacles: ObstacleField) -> tuple[int | None, int]:

@@ -419,6 +419,3 @@ class ModellingSession(Evaluation, CandidatePlanning):
         return ModellingResult(self.status, self.reason, self.records, self.metrics())
 
 
-
-
-

@@ -32,6 +32,7 @@ class ScanRecord:
     step_s: float = 0.0
     coverage: float = float("nan")  # ground-truth c_a, filled by metrics()
 
+
 @dataclass
 class ModellingResult:
     """The outcome of :meth:`ModellingSession.run`."""
@@ -41,6 +42,7 @@ class ModellingResult:
     records: list[ScanRecord]
     metrics: dict[str, Any] = field(default_factory=dict)
 
+
 def resolve_strategy(strategy: Any, registry: Any) -> Any:
     """A :class:`explore_plugins.strategies.Strategy` from a name, (name, params) or an object."""
     if isinstance(strategy, str):
@@ -48,6 +50,7 @@ def resolve_strategy(strategy: Any, registry: Any) -> Any:
     if isinstance(strategy, tuple):
         return registry.create("strategy", strategy[0], strategy[1], "<strategy>").strategy
     return getattr(strategy, "strategy", strategy)
+
 
 def failure_summary(what: str, failures: list[ScanPlan]) -> str:
     """``"10 candidates tried: 6 unreachable, 4 unknown"`` (the verdicts of failed plans)."""

@@ -302,4 +302,3 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         return self.summary()
 
 
-

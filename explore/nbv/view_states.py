@@ -18,10 +18,12 @@ STAGES = (
     "sampled", "ray_hits", "collision_free", "visible", "registration", "surface", "top", "planned", "feasible",
 )
 
+
 def default_planner(robot: Any) -> str:
     """``tuck_and_drive`` for a robot with a mobile base (no geometric planner finds its way
     among furniture in the full 10-D space: benchmarks/planners.py), else ``rrt_connect``."""
     return "tuck_and_drive" if getattr(robot, "base_dofs", ()) else "rrt_connect"
+
 
 # -- the view/state planning loop ------------------------------------------------------------
 @dataclass
@@ -43,6 +45,7 @@ class ViewState:
     expected: ExpectedUtility | None = None
     score: float = 0.0
     margin: float = float("nan")  # lead over the runner-up when chosen (explore.core.decisions)
+
 
 @dataclass
 class ViewRecord:
@@ -66,6 +69,7 @@ class ViewRecord:
     plan_attempts: int = 0  # planning queries of this iteration
     plan_successes: int = 0
     planning_s: float = 0.0  # their total time
+
 
 class FixedBeams:
     """The world's sensor with its beam directions computed once.

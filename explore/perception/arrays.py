@@ -18,6 +18,7 @@ def as_points(points: Any, name: str) -> Points3:
         raise ValueError(f"{name} must be an (n, 3) array, got shape {out.shape}")
     return out
 
+
 def as_pose(pose: Any | None) -> Pose:
     if pose is None:
         return np.eye(4)

@@ -8,16 +8,11 @@ import os
 import sqlite3
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from explore.core import BadInput
 from explore.sim import TriMesh
-
-if TYPE_CHECKING:
-    pass
-
 
 SCHEMA_VERSION = 1
 
@@ -63,8 +58,10 @@ CREATE INDEX locations_object ON locations(object_id, id);
 
 _TABLES = {"objects", "descriptors", "locations"}
 
+
 def _foreign(path: Path, why: str) -> BadInput:
     return BadInput(str(path), None, f"not an explore object database ({why}); the file was left untouched")
+
 
 def validate_existing(path: Path) -> None:
     """Refuse a file that is not an explore database, reading it through a read-only connection."""
@@ -88,6 +85,7 @@ def validate_existing(path: Path) -> None:
                 p.unlink(missing_ok=True)
         raise
 
+
 def _check_readonly(path: Path) -> None:
     try:
         con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_S)
@@ -108,6 +106,7 @@ def _check_readonly(path: Path) -> None:
     finally:
         con.close()
 
+
 def check_identity(path: Path, app: int, version: int, tables: set[str]) -> None:
     if app != APPLICATION_ID:
         raise _foreign(path, "an SQLite file of another program")
@@ -115,6 +114,7 @@ def check_identity(path: Path, app: int, version: int, tables: set[str]) -> None
         raise BadInput(str(path), None, f"schema version {version} is newer than this explore ({SCHEMA_VERSION})")
     if version < 1 or not _TABLES <= tables:
         raise _foreign(path, f"schema version {version} with tables {sorted(tables)}")
+
 
 def write_mesh_atomic(mesh: TriMesh, target: Path) -> None:
     """Write a binary PLY next to ``target`` and rename it into place."""

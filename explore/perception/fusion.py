@@ -25,6 +25,7 @@ class FusedPose:
     weight: float
     clusters: int
 
+
 def fuse_poses(
     poses: Sequence[Pose] | np.ndarray,
     weights: Sequence[float] | Array | None = None,

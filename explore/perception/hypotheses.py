@@ -28,6 +28,7 @@ Q_H_MIN = 0.5
 #: (another object touching it): right matches 0.92-0.98, wrong ones <= 0.71 on the tabletop
 RENDER_FIT_MIN = 0.9
 
+
 @dataclass
 class Model:
     """A database object: its mesh in the object frame and stored descriptors (kind -> (array, params))."""
@@ -44,6 +45,7 @@ class Model:
     def key(self) -> tuple[str, int, float]:
         """Identity for caches: name, vertex count and a checksum of the vertices."""
         return self.name, len(self.mesh.vertices), float(np.round(np.abs(self.mesh.vertices).sum(), 6))
+
 
 @dataclass(frozen=True)
 class Hypothesis:
@@ -66,6 +68,7 @@ class Hypothesis:
         rendered = self.diagnostics.get("N_r")
         return float(self.diagnostics["N_m"]) / rendered if rendered else math.nan
 
+
 def accepted(
     hypotheses: Sequence[Hypothesis], min_q_h: float = Q_H_MIN, min_render_fit: float = RENDER_FIT_MIN,
     min_matched: int = 100,
@@ -87,6 +90,7 @@ def accepted(
             out.append(h)
     return out
 
+
 def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 600) -> Array:
     """Distances (m) from ``samples`` points of the model surface at ``pose_a`` to the surface at ``pose_b``.
 
@@ -102,6 +106,7 @@ def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 
     at_a = points @ pose_a[:3, :3].T + pose_a[:3, 3]
     scene = raycasting_scene(mesh, pose_b)
     return scene.compute_distance(o3d.core.Tensor(at_a.astype(np.float32))).numpy().astype(np.float64)
+
 
 def rivals(
     hypotheses: Sequence[Hypothesis],

@@ -28,6 +28,7 @@ def scan_points_and_normals(scan: Scan, radius: float = 0.01) -> tuple[Points3, 
     pts = scan.points()
     return pts, estimate_normals(pts, radius, scan.origins[scan.hits])
 
+
 @dataclass(frozen=True)
 class IcpResult:
     """Outcome of a registration: ``transformation`` maps source points into the target frame.
@@ -42,6 +43,7 @@ class IcpResult:
     correspondences: int
     iterations: int
     information: Array | None = None  # 6x6, [rot, trans] order (gtsam Pose3 tangent)
+
 
 def _correspond(
     tree: cKDTree,
@@ -71,6 +73,7 @@ def _correspond(
     rows = np.nonzero(has)[0]
     return rows, idx[rows, first[rows]], dist[rows, first[rows]]
 
+
 def _point_to_plane_step(src: Points3, tgt: Points3, tgt_n: Points3) -> Pose:
     """One linearised point-to-plane update (Chen & Medioni; small-angle solve)."""
     a = np.hstack([np.cross(src, tgt_n), tgt_n])
@@ -80,6 +83,7 @@ def _point_to_plane_step(src: Points3, tgt: Points3, tgt_n: Points3) -> Pose:
     out[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix()
     out[:3, 3] = x[3:]
     return out
+
 
 def icp_local(
     source_points: Points3,

@@ -89,6 +89,7 @@ class LikelihoodField:
         out[:2, 3] += shift
         return out, score
 
+
 def _turn_about(point: Array, axis: Array, angle: float) -> Pose:
     """Rotation by ``angle`` about the line through ``point`` along ``axis``."""
     out = np.eye(4)
@@ -96,11 +97,13 @@ def _turn_about(point: Array, axis: Array, angle: float) -> Pose:
     out[:3, 3] = point - out[:3, :3] @ point
     return out
 
+
 def _within(transform: Pose, prediction: Pose, gate: tuple[float, float]) -> bool:
     """True if an ICP result stays within ``gate`` (m, rad) of its prediction: registration that
     slid along a symmetric table or a floor is an outlier the odometry rules out."""
     t_err, r_err = pose_error(transform, prediction)
     return t_err <= gate[0] and r_err <= gate[1]
+
 
 def _moves_within(correction: Pose, pose: Pose, gate: tuple[float, float]) -> bool:
     """True if a world-frame ``correction`` moves ``pose`` by at most ``gate`` (m, rad).
@@ -109,6 +112,7 @@ def _moves_within(correction: Pose, pose: Pose, gate: tuple[float, float]) -> bo
     metre from the origin is a large translation of the world frame but none of the sensor.
     """
     return _within(as_pose(correction) @ pose, pose, gate)
+
 
 class IncrementalPoseGraph:
     """The pose graph of :func:`pose_graph_from_scans`, grown one scan at a time.

@@ -35,6 +35,7 @@ class ModelCloud:
             self._tree = cKDTree(self.dense_points)
         return self._tree
 
+
 def model_cloud(mesh: TriMesh, sampling: float, views: int = 24, normal_radius: float = 0.01) -> ModelCloud:
     """Union of rendered views from the whole sphere (outward normals), voxel-sampled at ``sampling``."""
     from explore.core import fibonacci_sphere
@@ -46,11 +47,13 @@ def model_cloud(mesh: TriMesh, sampling: float, views: int = 24, normal_radius: 
     sampled = oriented(o3d_cloud(pts, nrm).voxel_down_sample(sampling))
     return ModelCloud(*dense, *sampled)
 
+
 def has_normal(normals: Points3) -> np.ndarray:
     """Rows whose normal did not vanish (a voxel average of opposite normals on a thin wall is
     zero): only they have a pair feature (PPF)."""
     length = np.linalg.norm(normals, axis=1)
     return np.isfinite(length) & (length > 1e-6)
+
 
 def oriented(cloud: Any) -> tuple[Points3, Points3]:
     """Points and unit normals of an Open3D cloud, without the points whose normal vanished."""

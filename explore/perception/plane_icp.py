@@ -30,6 +30,7 @@ def _plane(plane: Any) -> tuple[Array, float]:
         raise ValueError("a plane is (a, b, c, d) with a finite, non-zero normal")
     return v[:3] / norm, float(v[3] / norm)
 
+
 def _minimal_rotation(a: Array, b: Array) -> Array:
     """Smallest rotation taking unit vector ``a`` onto unit vector ``b``."""
     axis = np.cross(a, b)
@@ -40,6 +41,7 @@ def _minimal_rotation(a: Array, b: Array) -> Array:
         perp = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
         return Rotation.from_rotvec(np.pi * perp / np.linalg.norm(perp)).as_matrix()
     return Rotation.from_rotvec(axis / s * math.atan2(s, c)).as_matrix()
+
 
 def plane_frame(plane: Any, near: Array | None = None) -> Pose:
     """A frame whose x-y plane is ``plane`` (z = its normal), origin the projection of ``near``."""
@@ -53,6 +55,7 @@ def plane_frame(plane: Any, near: Array | None = None) -> Pose:
     out[:3, 3] = origin
     return out
 
+
 def snap_to_plane(source_plane: Any, target_plane: Any) -> Pose:
     """Smallest rigid motion putting ``source_plane`` onto ``target_plane`` (z, roll, pitch only)."""
     ns, ds = _plane(source_plane)
@@ -64,6 +67,7 @@ def snap_to_plane(source_plane: Any, target_plane: Any) -> Pose:
     out[:3, 3] = (ds - dt) * nt
     return out
 
+
 def as_2d_transform(transform: Pose, plane: Any) -> Pose:
     """Goerner's AS2DTRANSFORM: keep the in-plane translation and the yaw about the plane normal."""
     frame = plane_frame(plane)
@@ -73,6 +77,7 @@ def as_2d_transform(transform: Pose, plane: Any) -> Pose:
     out[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
     out[:2, 3] = local[:2, 3]
     return frame @ out @ invert(frame)
+
 
 def _kabsch_2d(src: Array, tgt: Array) -> Pose:
     """Least-squares 2-D rigid transform (x, y, yaw) on the first two coordinates, as a 4x4."""
@@ -84,6 +89,7 @@ def _kabsch_2d(src: Array, tgt: Array) -> Pose:
     out[:2, :2] = [[c, -s], [s, c]]
     out[:2, 3] = mu_t - out[:2, :2] @ mu_s
     return out
+
 
 def plane_icp(
     source: Points3,

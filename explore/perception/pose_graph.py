@@ -39,9 +39,11 @@ def _noise(sigmas: Any | None = None, information: Array | None = None, robust: 
         raise ValueError(f"unknown robust kernel {robust!r} (valid: huber, cauchy, none)")
     return gtsam.noiseModel.Robust.Create(estimator[robust].Create(k), base)
 
+
 def sigmas6(rotation_rad: float, translation_m: float) -> Array:
     """Diagonal sigmas in gtsam ``Pose3`` tangent order [rx, ry, rz, tx, ty, tz]."""
     return np.array([rotation_rad] * 3 + [translation_m] * 3, dtype=float)
+
 
 @dataclass
 class Edge:
@@ -52,6 +54,7 @@ class Edge:
     transform: Pose
     kind: str  # "odometry" | "icp" | "loop"
     fitness: float = 1.0
+
 
 @dataclass
 class PoseGraph:
@@ -167,6 +170,7 @@ class PoseGraph:
         covariance = gtsam.Marginals(graph, result).marginalCovariance(gtsam.symbol_shorthand.X(index))
         return np.sqrt(np.maximum(np.diag(covariance), 0.0))
 
+
 def rebase_scan(scan: Scan, corrected_pose: Pose) -> Scan:
     """The scan as if taken from ``corrected_pose`` instead of ``scan.sensor_poses[0]``.
 
@@ -183,6 +187,7 @@ def rebase_scan(scan: Scan, corrected_pose: Pose) -> Scan:
         meta=dict(scan.meta),
     )
 
+
 @dataclass(frozen=True)
 class PoseGraphResult:
     """Corrected poses and the edges that produced them."""
@@ -192,6 +197,7 @@ class PoseGraphResult:
     edges: list[Edge]
     error_before: float
     error_after: float
+
 
 def pose_graph_from_scans(
     scans: Sequence[Scan] | Sequence[Points3],

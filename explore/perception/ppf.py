@@ -40,6 +40,7 @@ def _align_to_x(points: Points3, normals: Points3) -> tuple[np.ndarray, Points3]
     t = -np.einsum("nij,nj->ni", r, points)
     return r, t
 
+
 def _pair_features(p1: Points3, n1: Points3, p2: Points3, n2: Points3) -> tuple[Array, Array, Array, Array]:
     """F(m1, m2) = (‖d‖, ∠(n1, d), ∠(n2, d), ∠(n1, n2)) (Kriegel Eq. 3.9, Drost 2010)."""
     d = p2 - p1
@@ -50,10 +51,12 @@ def _pair_features(p1: Points3, n1: Points3, p2: Points3, n2: Points3) -> tuple[
     f3 = np.arccos(np.clip(np.einsum("ij,ij->i", n1, n2), -1.0, 1.0))
     return dist, f1, f2, f3
 
+
 def _alpha(r: np.ndarray, t: Points3, ref: np.ndarray, other: Points3) -> Array:
     """Angle of the transformed partner point about the x axis (Drost's alpha_m / alpha_s)."""
     q = np.einsum("nij,nj->ni", r[ref], other) + t[ref]
     return np.arctan2(q[:, 2], q[:, 1])
+
 
 @dataclass
 class PPFTable:
@@ -68,6 +71,7 @@ class PPFTable:
     distance_step: float
     angle_bins: int
     diameter: float
+
 
 class PPFRecognizer(RecognizerBase):
     """Drost point-pair features: voting over (model point, alpha), ICP, q_h verification (Eq. 3.10)."""

@@ -33,10 +33,12 @@ def _cloud(points: Points3, voxel: float):  # -> open3d.geometry.PointCloud
     cloud.orient_normals_towards_camera_location(np.zeros(3))  # clouds are in the sensor frame
     return cloud
 
+
 def pyramid(points: Points3, voxel: float, scales: Sequence[float]) -> list:
     """Downsampled clouds with normals, one per scale (coarse to fine)."""
     pts = as_points(points, "points")
     return [_cloud(pts, voxel * s) for s in scales]
+
 
 def register_pair(
     source: Points3 | list,
@@ -76,6 +78,7 @@ def register_pair(
         transform, float(result.fitness), float(result.inlier_rmse), len(result.correspondence_set),
         max_iterations * len(scales), info / count,
     )
+
 
 def overlap(source: Points3, target: Points3, transform: Pose, distance: float) -> float:
     """Fraction of ``source`` points (moved by ``transform``) within ``distance`` of ``target``."""

@@ -28,6 +28,7 @@ def _cast(scene: Any, origins: Points3, directions: Points3) -> tuple[Array, Poi
     result = scene.cast_rays(rays)
     return result["t_hit"].numpy().astype(np.float64), result["primitive_normals"].numpy().astype(np.float64)
 
+
 def pinhole_directions(width: int, height: int, fov_deg: float) -> Points3:
     """Unit beam directions (OpenCV camera frame) of a pinhole camera, row-major."""
     f = (width / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
@@ -36,6 +37,7 @@ def pinhole_directions(width: int, height: int, fov_deg: float) -> Points3:
                             np.ones(width * height)])
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
+
 @dataclass(frozen=True)
 class RenderedView:
     """A synthetic view of a model: points (model frame) with normals, and model_T_camera."""
@@ -43,6 +45,7 @@ class RenderedView:
     points: Points3
     normals: Points3
     model_T_camera: Pose
+
 
 def view_directions(count: int, min_elevation_deg: float = 10.0, max_elevation_deg: float = 70.0) -> Points3:
     """``count`` unit vectors on the upper part of the view sphere (rings of elevation)."""
@@ -55,6 +58,7 @@ def view_directions(count: int, min_elevation_deg: float = 10.0, max_elevation_d
         az = (np.arange(n) + 0.5 * (k % 2)) * 2.0 * math.pi / n
         out.append(np.column_stack([np.cos(elev) * np.cos(az), np.cos(elev) * np.sin(az), np.full(n, math.sin(elev))]))
     return np.vstack(out)
+
 
 def render_views(
     mesh: TriMesh,
@@ -98,6 +102,7 @@ def render_views(
         views.append(RenderedView(points[keep], normals[keep], pose))
     return views
 
+
 def as_scan_map(scans: ScanSource | None, cluster: Cluster) -> dict[int, Scan]:
     """Normalise the scans argument to {view id: Scan}."""
     if scans is None:
@@ -107,6 +112,7 @@ def as_scan_map(scans: ScanSource | None, cluster: Cluster) -> dict[int, Scan]:
     if isinstance(scans, Mapping):
         return dict(scans)
     return dict(enumerate(scans))
+
 
 @dataclass(frozen=True)
 class Verification:
@@ -121,6 +127,7 @@ class Verification:
     def as_dict(self) -> dict[str, float]:
         return {"q_h": self.quality, "N_m": self.matched, "N_r": self.rendered, "N_c": self.cluster,
                 "occluded": self.occluded}
+
 
 def render_and_compare(
     mesh: TriMesh,
@@ -171,6 +178,7 @@ def render_and_compare(
         q = (matched / rendered) * (matched / n_cluster) ** 2
     return Verification(float(q), matched, rendered, n_cluster, occluded)
 
+
 # -- ICP and pose helpers -------------------------------------------------------------------
 def o3d_cloud(points: Points3, normals: Points3 | None = None):  # -> o3d.geometry.PointCloud
     import open3d as o3d
@@ -180,6 +188,7 @@ def o3d_cloud(points: Points3, normals: Points3 | None = None):  # -> o3d.geomet
         cloud.normals = o3d.utility.Vector3dVector(np.asarray(normals, dtype=float))
     return cloud
 
+
 def _rotation_from_vector(w: Array) -> np.ndarray:
     """Rodrigues: rotation matrix of the rotation vector ``w``."""
     theta = float(np.linalg.norm(w))
@@ -188,6 +197,7 @@ def _rotation_from_vector(w: Array) -> np.ndarray:
     k = w / theta
     kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
     return np.eye(3) + math.sin(theta) * kx + (1.0 - math.cos(theta)) * (kx @ kx)
+
 
 def icp_refine(
     cluster_points: Points3,
@@ -230,6 +240,7 @@ def icp_refine(
         fitness = float(ok.mean())
         rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else 0.0
     return invert(T), fitness, rmse
+
 
 def inlier_fraction(cluster_points: Points3, model: ModelCloud, world_T_model: Pose, distance: float) -> float:
     """Fraction of cluster points within ``distance`` of the model surface at the pose."""

@@ -28,6 +28,7 @@ from explore.sim import Scan
 # -- VFH "mean distance" (Görner Ch. 5) -------------------------------------------------------
 VFH_BINS = (45, 45, 45, 45, 128)
 
+
 def vfh_signature(points: Points3, normals: Points3, viewpoint: Array, soft: bool = True) -> Array:
     """VFH with shape-distribution component, 308 bins (Görner §6.3, PCL ``VFHEstimation``).
 
@@ -83,6 +84,7 @@ def vfh_signature(points: Points3, normals: Points3, viewpoint: Array, soft: boo
         offset += bins
     return out
 
+
 def _histogram(values: Array, bins: int, soft: bool) -> Array:
     """Counts of ``values`` in [0, 1] over ``bins`` bins; ``soft`` splits each count linearly
     between the two nearest bin centres (less sensitive to values near bin borders)."""
@@ -95,12 +97,14 @@ def _histogram(values: Array, bins: int, soft: bool) -> Array:
     hi = np.minimum(lo + 1, bins - 1)
     return np.bincount(lo, 1.0 - frac, minlength=bins) + np.bincount(hi, frac, minlength=bins)
 
+
 @dataclass
 class VFHModel:
     signatures: np.ndarray  # (k, 308)
     model_T_cameras: np.ndarray  # (k, 4, 4)
     centroids: Points3  # (k, 3) view centroids in the model frame
     cloud: ModelCloud | None = None
+
 
 class VFHRecognizer(RecognizerBase):
     """Görner's VFH (308 bins) "mean distance" over the closest 66 % of views, k = 1 priming, threshold γ.

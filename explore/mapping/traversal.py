@@ -1,0 +1,178 @@
+"""The voxel traversal of the PVS: Amanatides & Woo (1987) with OctoMap's computeRayKeys conventions (voxel
+borders at (k + 0.5 + 0.5 step) res in key coordinates, ties choose the same axis), so that the OctoMap-compatible mode
+reproduces OctoMap cell by cell. Rays are clipped to the grid box (slab test) before stepping; every visited voxel
+comes with the ray parameters t_in and t_exit of its segment."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+INF = np.inf
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ray_start(ox, oy, oz, ux, uy, uz, t_lo, t_hi, lat, inv_res, res, n0, n1, n2):
+    """Clip the ray segment [t_lo, t_hi] to the grid box and set up the DDA.
+
+    ``lat`` is the lattice index of the grid's first voxel (origin = lat * res). Returns
+    ``ok, t0, t1, i0, i1, i2, s0, s1, s2, tm0, tm1, tm2, td0, td1, td2`` with the entry
+    parameter ``t0``, the exit ``t1``, the entry voxel, the steps, the ray parameters of
+    the next border on each axis and the parameter increments per voxel.
+    """
+    t0 = t_lo
+    t1 = t_hi
+    lo0 = lat[0] * res
+    lo1 = lat[1] * res
+    lo2 = lat[2] * res
+    hi0 = (lat[0] + n0) * res
+    hi1 = (lat[1] + n1) * res
+    hi2 = (lat[2] + n2) * res
+    enter = -1
+    # slab test per axis
+    if ux != 0.0:
+        a = (lo0 - ox) / ux
+        b = (hi0 - ox) / ux
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+            enter = 0
+        if b < t1:
+            t1 = b
+    elif ox < lo0 or ox >= hi0:
+        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if uy != 0.0:
+        a = (lo1 - oy) / uy
+        b = (hi1 - oy) / uy
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+            enter = 1
+        if b < t1:
+            t1 = b
+    elif oy < lo1 or oy >= hi1:
+        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if uz != 0.0:
+        a = (lo2 - oz) / uz
+        b = (hi2 - oz) / uz
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+            enter = 2
+        if b < t1:
+            t1 = b
+    elif oz < lo2 or oz >= hi2:
+        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if not t0 < t1:
+        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    s0 = 1 if ux > 0.0 else (-1 if ux < 0.0 else 0)
+    s1 = 1 if uy > 0.0 else (-1 if uy < 0.0 else 0)
+    s2 = 1 if uz > 0.0 else (-1 if uz < 0.0 else 0)
+    # entry voxel: OctoMap's key of the entry point (floor(x / res)), relative to the grid
+    i0 = int(math.floor((ox + ux * t0) * inv_res)) - lat[0]
+    i1 = int(math.floor((oy + uy * t0) * inv_res)) - lat[1]
+    i2 = int(math.floor((oz + uz * t0) * inv_res)) - lat[2]
+    if enter == 0:
+        i0 = 0 if s0 > 0 else n0 - 1
+    elif enter == 1:
+        i1 = 0 if s1 > 0 else n1 - 1
+    elif enter == 2:
+        i2 = 0 if s2 > 0 else n2 - 1
+    i0 = min(max(i0, 0), n0 - 1)
+    i1 = min(max(i1, 0), n1 - 1)
+    i2 = min(max(i2, 0), n2 - 1)
+    if s0 != 0:
+        tm0 = ((i0 + lat[0] + 0.5 + 0.5 * s0) * res - ox) / ux
+        td0 = res / abs(ux)
+    else:
+        tm0 = INF
+        td0 = INF
+    if s1 != 0:
+        tm1 = ((i1 + lat[1] + 0.5 + 0.5 * s1) * res - oy) / uy
+        td1 = res / abs(uy)
+    else:
+        tm1 = INF
+        td1 = INF
+    if s2 != 0:
+        tm2 = ((i2 + lat[2] + 0.5 + 0.5 * s2) * res - oz) / uz
+        td2 = res / abs(uz)
+    else:
+        tm2 = INF
+        td2 = INF
+    return (True, t0, t1, i0, i1, i2, s0, s1, s2, tm0, tm1, tm2, td0, td1, td2)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def next_axis(tm0, tm1, tm2):
+    """Axis of the next border crossing (OctoMap's tie-breaking)."""
+    if tm0 < tm1:
+        return 0 if tm0 < tm2 else 2
+    return 1 if tm1 < tm2 else 2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def voxel_entry(tm0, tm1, tm2, td0, td1, td2):
+    """Ray parameter where the ray enters the current voxel (the clip point may lie inside it).
+
+    The voxel is the intersection of three slabs; the ray is inside slab k for
+    t in [tm_k - td_k, tm_k], so it enters the voxel at the largest of the lower ends.
+    """
+    t = -INF
+    if td0 < INF:
+        t = max(t, tm0 - td0)
+    if td1 < INF:
+        t = max(t, tm1 - td1)
+    if td2 < INF:
+        t = max(t, tm2 - td2)
+    return t
+
+
+@njit(cache=True, nogil=True)
+def traverse(origin, direction, t_max, lat, res, shape):
+    """Voxels (k, 3) and their ray segments (k, 2) of one ray from t = 0 to ``t_max``."""
+    n0, n1, n2 = shape[0], shape[1], shape[2]
+    inv_res = 1.0 / res
+    (ok, t0, t1, i0, i1, i2, s0, s1, s2, tm0, tm1, tm2, td0, td1, td2) = ray_start(
+        origin[0], origin[1], origin[2], direction[0], direction[1], direction[2],
+        0.0, t_max, lat, inv_res, res, n0, n1, n2,
+    )
+    cap = n0 + n1 + n2 + 3
+    voxels = np.empty((cap, 3), np.int64)
+    segments = np.empty((cap, 2), np.float64)
+    k = 0
+    if not ok:
+        return voxels[:0], segments[:0]
+    t_in = t0
+    while k < cap:
+        d = next_axis(tm0, tm1, tm2)
+        t_exit = tm0 if d == 0 else (tm1 if d == 1 else tm2)
+        voxels[k, 0] = i0
+        voxels[k, 1] = i1
+        voxels[k, 2] = i2
+        segments[k, 0] = t_in
+        segments[k, 1] = min(t_exit, t1)
+        k += 1
+        if t_exit >= t1:
+            break
+        t_in = t_exit
+        if d == 0:
+            i0 += s0
+            tm0 += td0
+            if i0 < 0 or i0 >= n0:
+                break
+        elif d == 1:
+            i1 += s1
+            tm1 += td1
+            if i1 < 0 or i1 >= n1:
+                break
+        else:
+            i2 += s2
+            tm2 += td2
+            if i2 < 0 or i2 >= n2:
+                break
+    return voxels[:k], segments[:k]
