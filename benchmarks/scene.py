@@ -185,9 +185,9 @@ def part_fusion(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]
                 ObjectDatabase.open(Path(tempfile.mkdtemp(prefix="explore-fusion-")) / "o.db") as db:
             db.seed_from_world(sim)
             session = SceneSession(sim, registry, db, seed=seed)
-            session.overview()
+            session.viewing.overview()
             session.segment()
-            session.recognise_all()
+            session.recognition.recognise_all()
             for obj in session.candidates():
                 if obj.model not in KNOWN:
                     continue
@@ -195,11 +195,11 @@ def part_fusion(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]
                 model = obj.model
                 hypotheses = []
                 for taken in range(1, 11):
-                    view = session.next_view(obj, f"fusion {model}")
+                    view = session.viewing.next_view(obj, f"fusion {model}")
                     if view is None:
                         break
                     session.segment()
-                    found = session.view_hypothesis(obj, view.index, [model])
+                    found = session.recognition.view_hypothesis(obj, view.index, [model])
                     if found is not None:
                         hypotheses.append(found)
                     if hypotheses:
@@ -237,7 +237,7 @@ def part_pose_graph(args: argparse.Namespace, registry: Any) -> list[dict[str, A
                     ObjectDatabase.open(Path(tempfile.mkdtemp(prefix="explore-graph-")) / "o.db") as db:
                 session = SceneSession(sim, registry, db, seed=seed)
                 if sim.spec.overview is not None:
-                    session.overview()
+                    session.viewing.overview()
                 for focus in known_tables(sim).values():  # Görner's surround step at every table
                     surround(session, focus, 0.7, 1.5, 0.5)
                 errors = pose_graph_errors(session)

@@ -137,7 +137,7 @@ class StartScene(ExploreBehaviour):
 
     def work(self) -> Outcome:
         from explore.perception import ObjectDatabase, default_path
-        from explore.scene import SceneSession
+        from explore.scene import SceneSession, SceneSettings
 
         ctx, p = self.context, self.p
         config = ctx.config
@@ -147,8 +147,7 @@ class StartScene(ExploreBehaviour):
                 database.seed_from_world(ctx.sim)
             recognizer = ctx.registry.create("recognizer", p["recognizer"], {"min_q_h": p["min_q_h"]},
                                              self.tree_path or "<tree>", "recognizer")
-            session = SceneSession(
-                ctx.sim, ctx.registry, database,
+            settings = SceneSettings(
                 segmenter=(p["segmenter"], {"scale": p["scale"]}), recognizer=recognizer,
                 validator=p["validator"],
                 strategy=(config.strategy or p["strategy"], config.scoped("strategy")),
@@ -158,6 +157,7 @@ class StartScene(ExploreBehaviour):
                 multi_view_views=p["multi_view_views"], noise=p["noise"], planner=config.planner,
                 run_name=ctx.out_dir.name, register=p["register"],
             )
+            session = SceneSession(ctx.sim, ctx.registry, database, settings)
         except BaseException:
             database.close()
             raise
@@ -179,7 +179,7 @@ class SceneOverview(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        views = _scene(self).overview()
+        views = _scene(self).viewing.overview()
         if not views:
             return failure("no overview view is reachable")
         for view in views:
@@ -215,7 +215,7 @@ class RecogniseObjects(ExploreBehaviour):
         count = 0
         for obj in scene.candidates():
             if obj.status in ("unexplained", "unknown", "ambiguous"):
-                hypotheses = scene.recognise(obj)
+                hypotheses = scene.recognition.recognise(obj)
                 count += 1
                 self.context.trace("decision", what="recognise", object=obj.id,
                                    hypotheses=[[h.model, round(h.q_h, 4)] for h in hypotheses[:5]])
@@ -233,10 +233,10 @@ class ValidateObjects(ExploreBehaviour):
         scene = _scene(self)
         for obj in scene.candidates():
             if obj.status in ("unexplained", "unknown", "ambiguous") and obj.hypotheses is not None:
-                scene.validate(obj)
+                scene.recognition.validate(obj)
                 self.context.trace("decision", what="validate", object=obj.id, status=obj.status, model=obj.model,
-                                   q_h=obj.q_h, v_h=obj.v_h, q_h_margin=obj.q_h - scene.min_q_h,
-                                   v_h_margin=obj.v_h - scene.validator_threshold, rejected=obj.rejected)
+                                   q_h=obj.q_h, v_h=obj.v_h, q_h_margin=obj.q_h - scene.recognition.min_q_h,
+                                   v_h_margin=obj.v_h - scene.recognition.validator_threshold, rejected=obj.rejected)
         unknown = [o.id for o in scene.by_status("unknown") if o in scene.candidates()]
         ambiguous = [o.id for o in scene.by_status("ambiguous") if o in scene.candidates()]
         self.write("unknown", unknown)
@@ -259,7 +259,7 @@ class MultiViewStep(ExploreBehaviour):
         if obj is None:
             self.write("object_done", True)
             return success("nothing ambiguous")
-        done = _scene(self).multi_view_step(obj)
+        done = _scene(self).recognition.multi_view_step(obj)
         self.write("object_done", done)
         self.context.status_line = _status(self)
         self.context.trace("decision", what="multi_view", object=obj.id, status=obj.status, views=obj.multi_views)
@@ -279,7 +279,7 @@ class ModelCluster(ExploreBehaviour):
         if obj is None:
             self.write("object_done", True)
             return success("nothing to model")
-        done = _scene(self).model_step(obj)
+        done = _scene(self).object_modelling.model_step(obj)
         self.write("object_done", done)
         self.context.status_line = _status(self)
         self.context.trace("scan", object=obj.id, purpose="model", scans=obj.modelling_scans,
@@ -297,8 +297,8 @@ class UpdateDatabase(ExploreBehaviour):
     def work(self) -> Outcome:
         scene = _scene(self)
         obj = _current(self, "modelling")
-        name = scene.finish_modelling(obj) if obj is not None else None
-        scene.remember_locations()
+        name = scene.object_modelling.finish_modelling(obj) if obj is not None else None
+        scene.database_update.remember_locations()
         if name is not None:
             self.context.trace("decision", what="database", object=obj.id, added=name)
             return success(f"added {name}")
@@ -316,7 +316,7 @@ class LearnObject(ExploreBehaviour):
         obj = _current(self, "unknown")
         if obj is None:
             return success("nothing to learn")
-        name = _scene(self).learn_from_views(obj)
+        name = _scene(self).object_modelling.learn_from_views(obj)
         if name is None:
             return success(f"object {obj.id}: too few points, left unknown")
         self.context.trace("decision", what="database", object=obj.id, added=name)
@@ -334,7 +334,7 @@ class SettleFromViews(ExploreBehaviour):
         obj = _current(self, "ambiguous")
         if obj is None:
             return success("nothing ambiguous")
-        return success(f"object {obj.id}: {_scene(self).settle_from_views(obj)}")
+        return success(f"object {obj.id}: {_scene(self).recognition.settle_from_views(obj)}")
 
 
 class CheckExplained(ExploreBehaviour):
@@ -366,7 +366,7 @@ class RegisterViews(ExploreBehaviour):
         scene = _scene(self)
         if len(scene.views) < 2:
             return success("fewer than two views")
-        result = scene.correct_poses()
+        result = scene.viewing.correct_poses()
         edges = sum(e.kind != "odometry" for e in result.edges)
         return success(f"{len(scene.views)} poses, {edges} ICP edges")
 

@@ -109,7 +109,7 @@ def test_second_run_recognises_the_modelled_object(registry, small_run, tmp_path
     with Simulation(_world(tmp_path, REARRANGED), registry) as sim, ObjectDatabase.open(db) as database:
         scene = SceneSession(sim, registry, database, seed=1, multi_view_views=5)
         scene.step()  # overview, segmentation, recognition, validation
-        scene.resolve_ambiguous()  # a second view confirms each pose
+        scene.recognition.resolve_ambiguous()  # a second view confirms each pose
         metrics = scene.metrics()
     rows = {r["name"]: r for r in metrics["objects"]}
     assert all(r["result"] == "recognised" and r["correct_model"] for r in rows.values()), rows
@@ -128,15 +128,15 @@ def test_touching_objects_are_split_after_recognition(registry, tmp_path):
     with Simulation(_world(tmp_path, TOUCHING), registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         db.seed_from_world(sim)
         scene = SceneSession(sim, registry, db)
-        scene.overview()
+        scene.viewing.overview()
         assert len(scene.segment()) == 1
-        scene.recognise_all()
+        scene.recognition.recognise_all()
         objects = scene.candidates()
         assert len(objects) == 2
         duck = next(o for o in objects if o.model == "duck")
         rest = next(o for o in objects if o is not duck)
         assert rest.status == "unexplained" and "split off" in rest.events[0]
-        scene.resolve_ambiguous()  # the duck's pose confirmed by a second view
+        scene.recognition.resolve_ambiguous()  # the duck's pose confirmed by a second view
         assert duck.status == "recognised"
         metrics = scene.metrics()
     row = next(r for r in metrics["objects"] if r["name"] == "duck")
@@ -293,7 +293,7 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_
 
     with Simulation("scene_small_mobile", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         scene = SceneSession(sim, registry, db, seed=0)
-        scene.overview()
+        scene.viewing.overview()
         surround(scene, known_tables(sim)["table"], 0.7, 1.5, 0.8)
         errors = pose_graph_errors(scene)
         odometry = PVS.for_region(sim.spec.region_min, sim.spec.region_max, scene.resolution)
@@ -303,7 +303,7 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_
         free_odometry = float(np.mean(odometry.probability(surface) < 0.25))
         free_corrected = float(np.mean(scene.pvs.probability(surface) < 0.25))
         # register_views (the patrol's batch step) keeps what the incremental graph found
-        scene.correct_poses()
+        scene.viewing.correct_poses()
         again = pose_graph_errors(scene)
     assert again["corrected_mm"] <= 1.05 * errors["corrected_mm"] + 1.0, (again, errors)
     # the base really drifts (how many of the 8 surround poses it reaches depends on its noisy path)

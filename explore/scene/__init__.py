@@ -6,12 +6,15 @@ views, patrol and metrics.
 from explore.scene.metrics import model_truth, pose_graph_errors
 from explore.scene.motion import Mover
 from explore.scene.patrol import known_tables, surround
-from explore.scene.session import FLOOR, SceneSession, close_holes, environment_reference
+from explore.scene.scene_objects import FLOOR, close_holes, environment_reference
+from explore.scene.session import SceneSession
+from explore.scene.settings import SceneSettings
 
 __all__ = [
     "FLOOR",
     "Mover",
     "SceneSession",
+    "SceneSettings",
     "close_holes",
     "environment_reference",
     "known_tables",

@@ -51,7 +51,7 @@ def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, s
             reached = scene.mover.reach(target)
             if reached is None:
                 continue
-            view = scene.add_view(reached[0], "surround", configs=reached[1])
+            view = scene.viewing.add_view(reached[0], "surround", configs=reached[1])
             if view is not None:
                 taken.append(view)
             break

@@ -1,0 +1,71 @@
+"""The database step of a scene exploration (Kriegel thesis Sec. 3.1, 5.6.3): a modelled object is added with a
+short, stable name (<world>-<n>) and its provenance, and every recognised object's location is remembered."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from explore.perception import (
+    Model,
+)
+from explore.scene.scene_objects import (
+    RECOGNISED,
+    SceneObject,
+)
+from explore.sim import TriMesh
+
+if TYPE_CHECKING:
+    from explore.scene.session import SceneSession
+
+
+class DatabaseUpdate:
+    """The database step: add modelled objects, remember where recognised ones were."""
+
+    def __init__(self, scene: SceneSession) -> None:
+        self.scene = scene
+
+    # -- the object database -------------------------------------------------------------------
+    def add_to_database(self, obj: SceneObject, world_mesh: TriMesh, scans: int) -> str:
+        """Add a modelled mesh (world frame) with descriptors, provenance and location."""
+        scene = self.scene
+        from explore.perception import model_descriptors, object_frame
+
+        start = time.perf_counter()
+        world_T_model, mesh = object_frame(world_mesh)
+        name = self._new_name()
+        from explore.perception import PPFRecognizer, VFHRecognizer
+
+        chosen = [scene.recognizer] if hasattr(scene.recognizer, "describe") else []  # the configured one's own
+        kinds = {r.descriptor_kind for r in chosen}
+        chosen += [r for r in (PPFRecognizer(), VFHRecognizer()) if r.descriptor_kind not in kinds]
+        descriptors = model_descriptors(Model(name, mesh), chosen)
+        coverage = float(np.clip(obj.coverage_estimate, 0.0, 1.0))
+        scene.db.add(name, mesh, provenance="modelled", world=scene.sim.spec.name, run=scene.settings.run_name,
+                     scans=int(scans), coverage=coverage, descriptors=descriptors)
+        scene.db.set_location(name, scene.sim.spec.name, world_T_model, np.vstack(world_mesh.bounds))
+        obj.pose = world_T_model
+        scene.added.append(name)
+        scene.model_cache = None
+        scene.timed("database_s", start)
+        scene.say(f"object {obj.id}: added to the database as {name}")
+        return name
+
+    def _new_name(self) -> str:
+        """A short, stable name for a modelled object: ``<world>-<n>``, the first n free in the database
+        (the run that made it is recorded beside it, not in its name)."""
+        scene = self.scene
+        stem = "".join(ch if ch.isalnum() or ch in "_.-" else "_" for ch in scene.sim.spec.name)
+        k = 1
+        while f"{stem}-{k}" in scene.db:
+            k += 1
+        return f"{stem}-{k}"
+
+    def remember_locations(self) -> None:
+        """Record where each recognised object was seen (the database's last known location)."""
+        scene = self.scene
+        for obj in scene.by_status(RECOGNISED):
+            if obj.model is not None and obj.pose is not None and obj.model in scene.db:
+                scene.db.set_location(obj.model, scene.sim.spec.name, obj.pose, np.vstack(obj.cluster.aabb))

@@ -1,0 +1,64 @@
+"""The settings of a scene exploration: every choice of :class:`~explore.scene.session.SceneSession` in one value."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class SceneSettings:
+    """What a scene exploration uses and how much it may do.
+
+    Attributes
+    ----------
+    segmenter, recognizer, validator, registrar : plugin names or (name, params)
+    strategy : NBV strategy for modelling unknown objects (name, (name, params) or Strategy)
+    seed : seeds the sensor noise, the execution noise and random choices
+    resolution : scene PVS voxel edge (None: 5 mm, coarser for large regions: at most 4 M voxels)
+    max_views : view budget of the whole exploration
+    recognition_views : recognise an object from the points of at most this many of its views
+        (those with the most points; render-and-compare costs one ray cast per view)
+    model_scans : scan budget per modelled object; ``model_coverage`` stops earlier at ĉ_m
+    retry_scans : re-try recognition after each of the first ``retry_scans`` modelling scans
+    multi_view_views : view budget per ambiguous object; ``multi_view_agree`` per-view
+        hypotheses must agree (fused cluster) before an object counts as recognised
+    noise : execute motions with the robot's positioning noise
+    planner : motion planner plugin name (robots other than the free flyer)
+    run_name : recorded as the provenance of modelled objects
+    associate_tolerance : a new view's cluster joins an object when its points come this close
+    box_margin : the modelling box around an object's points (and ``box_top`` above them)
+    min_points : clusters with fewer points (over all views) are noise, not objects
+    reach_tries : NBS candidates tried for reachability (IK) per modelling step before the most
+        novel reachable view of the object is taken instead
+    split_distance, split_share : points of a recognised object farther than ``split_distance``
+        from the model, if at least ``split_share`` of them, are another object touching it
+    register : grow a pose graph with every view when the robot has a noisy base (and correct
+        the views, the clusters and the PVS with it)
+    """
+
+    segmenter: Any = ("plane_clusters", {"scale": "table"})
+    recognizer: Any = "ppf"
+    validator: Any = "pvs_votes"
+    registrar: Any = "pose_graph"
+    strategy: Any = ("ig_quality/bs_hr", {})
+    seed: int = 0
+    resolution: float | None = None
+    max_views: int = 80
+    recognition_views: int = 6
+    model_scans: int = 12
+    model_coverage: float = 0.75
+    retry_scans: int = 3
+    multi_view_views: int = 10
+    multi_view_agree: int = 2
+    noise: bool = True
+    planner: str | None = None
+    run_name: str = "run"
+    associate_tolerance: float = 0.01
+    box_margin: float = 0.03
+    box_top: float = 0.04
+    min_points: int = 60
+    reach_tries: int = 4
+    split_distance: float = 0.015
+    split_share: float = 0.1
+    register: bool = True

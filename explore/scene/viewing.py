@@ -1,0 +1,204 @@
+"""Taking the views of a scene exploration: overview views, views for an object (nearer, or another direction
+when the robot cannot reach), each scan recorded with its believed, corrected and true pose, integrated into
+the PVS; the pose graph corrects the poses of a moving base and the views are re-integrated (Kriegel Sec.
+5.6.1, Goerner Alg. 2).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from explore.core import Pose, invert, pose_error, transform_points
+from explore.perception import (
+    Cluster,
+    PoseGraphResult,
+    rebase_scan,
+)
+from explore.scene.motion import Target, target_start
+from explore.scene.scene_objects import (
+    SceneObject,
+    View,
+)
+from explore.scene.views import as_target, order_by_novelty, overview_targets, viewing_distance, views_around
+from explore.sim import Scan
+
+if TYPE_CHECKING:
+    from explore.scene.session import SceneSession
+
+
+class ViewTaking:
+    """The viewing step: take, record and correct the views."""
+
+    def __init__(self, scene: SceneSession) -> None:
+        self.scene = scene
+
+    # -- views -------------------------------------------------------------------------------
+    def add_view(self, target: Target, purpose: str, object_id: int | None = None,
+                 configs: list | None = None) -> View | None:
+        """Move there, scan, record the scan at the believed pose, integrate it into the PVS.
+
+        None if the view budget is spent or the robot cannot reach the target.
+        """
+        scene = self.scene
+        if scene.budget_left <= 0:
+            return None
+        start = time.perf_counter()
+        move = scene.mover.move(target, configs)
+        scene.timed("motion_s", start)
+        if move is None:
+            return None
+        start = time.perf_counter()
+        scan = scene.sim.sensor.acquire(scene.sim, move.target, scene.rng_sensor)
+        true_pose = target_start(move.target)
+        if not np.allclose(move.believed, true_pose, atol=1e-9):
+            scan = rebase_scan(scan, move.believed)
+        view = View(len(scene.views), scan, move.believed.copy(), true_pose.copy(), purpose, object_id)
+        scene.views.append(view)
+        scene.pending_views.append(view.index)
+        scene.timed("scan_s", start)
+        if scene.graph is not None:
+            start = time.perf_counter()
+            self._apply(scene.graph.add(scan, view.believed, scene.mover.odometry_sigmas(),
+                                       scene.mover.laser_points(true_pose, scene.rng_sensor)))
+            scene.timed("registration_s", start)
+        else:
+            scene.pvs.integrate(scan)
+        scene.say(f"view {view.index + 1}: {purpose} ({int(scan.hits.sum())} returns)")
+        return view
+
+    def scans(self, view_ids: Sequence[int] | None = None) -> dict[int, Scan]:
+        scene = self.scene
+        ids = range(len(scene.views)) if view_ids is None else view_ids
+        return {int(i): scene.views[int(i)].scan for i in ids}
+
+    def overview(self) -> list[View]:
+        """The first views of the scene (world ``overview`` or views of the region); PVS initialised."""
+        scene = self.scene
+        taken = []
+        for target in overview_targets(scene.sim.spec, scene.sim.sensor, scene.sim.robot):
+            view = self.add_view(target, "overview")
+            if view is not None:
+                taken.append(view)
+                if scene.sim.sensor.geometry != "line" and scene.sim.spec.overview is not None:
+                    break
+        return taken
+
+    def next_view(self, obj: SceneObject, purpose: str) -> View | None:
+        """Take the reachable view of ``obj`` farthest (in angle) from the views that saw it.
+
+        A direction the robot cannot reach at the viewing distance is tried nearer (3/4, 1/2 of
+        it, not below the sensor's near limit): an arm reaches a steep view from closer. A view
+        that fails to plan gives way to the next one; ``2 * reach_tries`` directions are tried.
+        """
+        scene = self.scene
+        centre = obj.cluster.centroid
+        lo, hi = obj.cluster.aabb
+        extent = float(np.linalg.norm(hi - lo))
+        distance = viewing_distance(scene.sim.sensor, extent)
+        near = viewing_distance(scene.sim.sensor, extent, far=0.0)
+        ladder = [d for d in (distance, 0.75 * distance, 0.5 * distance) if d >= near] or [distance]
+        height = getattr(scene.sim.robot, "camera_height", None)
+        rings = [views_around(centre, d, camera_height=height)[0] for d in ladder]
+        seen = np.array([scene.views[v].believed[:3, 3] for v in obj.cluster.view_ids])
+        directions = 0
+        for index in order_by_novelty(rings[0], seen, centre):
+            if not scene.mover.plausible(rings[0][index][:3, 3], centre):
+                continue
+            directions += 1
+            for d, ring in zip(ladder, rings, strict=True):
+                reached = scene.mover.reach(as_target(scene.sim.sensor, ring[index], obj.cluster.points, d))
+                if reached is not None:
+                    view = self.add_view(reached[0], purpose, obj.id, reached[1])
+                    if view is not None or scene.budget_left <= 0:
+                        return view
+                    break
+            if directions >= 2 * scene.settings.reach_tries:
+                break
+        return None
+
+    def already_taken(self, target: Target, eye_tol: float = 0.02, angle_tol_deg: float = 5.0) -> bool:
+        """A view was already taken from (about) ``target``'s pose: in a static scene it would
+        show the same surface again (an NBS utility that cannot see why its gain never comes
+        would otherwise pick it over and over)."""
+        scene = self.scene
+        if not scene.views:
+            return False
+        pose = target_start(target)
+        taken = np.array([v.recorded for v in scene.views])
+        near = np.linalg.norm(taken[:, :3, 3] - pose[:3, 3], axis=1) <= eye_tol
+        aligned = taken[:, :3, 2] @ pose[:3, 2] >= math.cos(math.radians(angle_tol_deg))
+        return bool(np.any(near & aligned))
+
+    # -- pose graph and re-integration ---------------------------------------------------------
+    def correct_poses(self) -> Any:
+        """gtsam pose graph over every view (odometry + ICP factors); re-integrate at the result.
+
+        A session with an incremental graph (a noisy mobile base) has registered and
+        localised every view as it came; that graph's solution is the result (a batch graph
+        over the same views would lack its multi-start search and its map factors).
+        """
+        scene = self.scene
+        start = time.perf_counter()
+        if scene.graph is not None:
+            poses = scene.graph.graph.optimize(scene.graph.max_iterations)
+            scene.graph.poses = poses
+            self.reintegrate(list(poses))
+            scene.timed("registration_s", start)
+            error = scene.graph.graph.error
+            return PoseGraphResult(poses, np.stack(scene.graph.believed), list(scene.graph.graph.edges), *error)
+        believed = [v.believed for v in scene.views]
+        result = scene.registrar.register([rebase_scan(v.scan, v.believed) if v.corrected is not None else v.scan
+                                          for v in scene.views], believed)
+        self.reintegrate(list(result.poses))
+        scene.timed("registration_s", start)
+        return result
+
+    def _apply(self, poses: np.ndarray, tolerance: tuple[float, float] = (0.002, math.radians(0.2))) -> None:
+        """Take the incremental graph's poses: the new view is integrated at its corrected pose;
+        if an earlier view moved by more than ``tolerance`` (m, rad) everything is re-integrated."""
+        scene = self.scene
+        moved = any(
+            max(err[0] / tolerance[0], err[1] / tolerance[1]) > 1.0
+            for err in (pose_error(p, v.recorded)
+                        for v, p in zip(scene.views[:-1], poses[:-1], strict=True))
+        )
+        if moved:
+            self.reintegrate(list(poses))
+            return
+        view = scene.views[-1]
+        view.scan = rebase_scan(view.scan, poses[-1])
+        view.corrected = np.asarray(poses[-1]).copy()
+        scene.pvs.integrate(view.scan)
+        scene.registered = True
+
+    def reintegrate(self, poses: Sequence[Pose]) -> None:
+        """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
+        scene = self.scene
+        from explore.mapping import PVS
+
+        deltas = []
+        for view, pose in zip(scene.views, poses, strict=True):
+            current = view.recorded
+            deltas.append(np.asarray(pose) @ invert(current))
+            view.scan = rebase_scan(view.scan, pose)
+            view.corrected = np.asarray(pose).copy()
+        for obj in scene.objects:
+            c = obj.cluster
+            points, normals = c.points.copy(), c.normals.copy()
+            for index in np.unique(c.views):
+                mask = c.views == index
+                delta = deltas[int(index)]
+                points[mask] = transform_points(delta, c.points[mask])
+                normals[mask] = c.normals[mask] @ delta[:3, :3].T
+            obj.cluster = Cluster(c.id, points, normals, c.views, c.beams, c.up)
+            obj._sample = None
+        scene.pvs = PVS.for_region(scene.sim.spec.region_min, scene.sim.spec.region_max, scene.resolution)
+        for view in scene.views:
+            scene.pvs.integrate(view.scan)
+        scene.mover.pvs = scene.pvs
+        scene.registered = True
