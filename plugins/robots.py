@@ -135,7 +135,7 @@ class _BulletRobot(Robot):
         self._local_points: list[tuple[Part, Points3]] = []
         self._points_at: dict[float, list[tuple[Part, Points3]]] = {}
         self._com_offset: dict[int, Pose] = {}
-        self.state: Array | None = None
+        self._state: Array | None = None
 
     # -- geometry ----------------------------------------------------------------------------
     @property
@@ -147,10 +147,10 @@ class _BulletRobot(Robot):
     def set_config(self, q: Array) -> None:
         """Put the pybullet bodies in configuration ``q`` (cached)."""
         q = np.asarray(q, dtype=float)
-        if self.state is not None and np.array_equal(self.state, q):
+        if self._state is not None and np.array_equal(self._state, q):
             return
         self._set_state(q)
-        self.state = q.copy()
+        self._state = q.copy()
 
     def _set_state(self, q: Array) -> None:
         raise NotImplementedError
@@ -608,7 +608,7 @@ class _ArmChain:
         """Set the joints (the robot's cached configuration is then unknown)."""
         for j, v in zip(self.joints, q, strict=True):
             p.resetJointState(self.body, j, float(v), physicsClientId=self.robot.client)
-        self.robot.state = None
+        self.robot._state = None
 
     def flange_pose(self, q: Array | None = None) -> Pose:
         """world_T_flange at joints ``q`` (set first) or at the current joints."""
@@ -756,7 +756,7 @@ class Arm(_BulletRobot):
             )
             q = self.chain.ik(target, q0) if seed is None else self.chain.refine(target, q0.copy())
             dp, da = pose_error(self.fk(q), world_T_sensor)
-            self.state = None
+            self._state = None
             if dp > IK_POSITION_TOL or da > IK_ANGLE_TOL:
                 continue
             if check_collision and (self.in_collision(q) or not self.within_limits(q)):
@@ -871,7 +871,7 @@ class MobileManipulator(_BulletRobot):
             starts = self._ik_starts(world_T_sensor, rng)
         for base, q0 in starts:
             self.set_config(np.concatenate([base, q0]))
-            self.state = None
+            self._state = None
             arm = self.chain.ik(target, q0) if seed is None else self.chain.refine(target, q0.copy())
             q = np.concatenate([base, arm])
             dp, da = pose_error(self.fk(q), world_T_sensor)

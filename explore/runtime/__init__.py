@@ -4,23 +4,17 @@ reports.
 
 # The names other packages use (they import from the package, never from its modules).
 from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, success
-from explore.runtime.compare import (
-    RESULTS_FILE,
-    Grid,
-    OnDone,
-    RunSpec,
-    compare,
-    complete_metrics,
-    make_registry,
-    read_results,
-    run_isolated,
-    run_local,
-)
+from explore.runtime.compare import compare
+from explore.runtime.compare_grid import RESULTS_FILE, Grid, OnDone, RunSpec
+from explore.runtime.compare_results import complete_metrics, read_results
 from explore.runtime.hookspecs import hookimpl
+from explore.runtime.isolated_runs import make_registry, run_isolated, run_local
 from explore.runtime.outputs import ModellingOutputs, object_result, tree_dot, write_tree_diagram
 from explore.runtime.registry import KINDS, Registry
-from explore.runtime.report import step_times, write_report
-from explore.runtime.run import RunConfig, check_inputs, default_out_dir, execute
+from explore.runtime.report import write_report
+from explore.runtime.report_tables import step_times
+from explore.runtime.run import execute
+from explore.runtime.run_inputs import RunConfig, check_inputs, default_out_dir
 from explore.runtime.rundiff import comparable, differences, load_run, run_differences
 from explore.runtime.trees import build, find_tree, list_trees, load_tree
 

@@ -17,6 +17,8 @@ from typing import Any
 import py_trees
 from py_trees.common import Access, Status
 
+from explore.core import BadInput
+
 
 class Outcome:
     """What :meth:`ExploreBehaviour.work` returns: a status and a reason."""
@@ -101,8 +103,6 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
 
     # -- work --------------------------------------------------------------------------------
     def _guarded(self) -> Outcome:
-        from explore.core import BadInput
-
         try:
             outcome = self.work()
         except BadInput:

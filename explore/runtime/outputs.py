@@ -8,8 +8,6 @@ other output is written by a provider in ``context.state`` (an object with
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
 import subprocess
 import unicodedata
@@ -18,7 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from explore.runtime.run import METRICS_SCHEMA_VERSION, RunContext, _jsonable
+from explore.core import save_curves_png
+from explore.mapping import GroundTruthMetrics
+from explore.runtime.context import RunContext
+from explore.runtime.run_inputs import METRICS_SCHEMA_VERSION, write_json_atomic
 
 OBJECT_MODELLED = 0.8  # c_a from which an object counts as modelled (the thesis' coverage target)
 
@@ -29,13 +30,6 @@ def object_result(coverage: float | None) -> str:
     if coverage is None or coverage <= 0.0:
         return "not_seen"
     return "modelled" if coverage >= OBJECT_MODELLED else "partial"
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON through a temporary file so an interrupt never leaves half a file."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(data), indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def tree_dot(root: Any) -> Any:
@@ -175,8 +169,6 @@ class ModellingOutputs:
 
     def run_outputs(self, out_dir: Any) -> dict[str, Any]:
         """Meshes, PVS, pictures and the modelling metrics for metrics.json."""
-        from explore.core import save_curves_png
-
         out_dir = Path(out_dir)
         s = self.session
         metrics = s.metrics()
@@ -229,8 +221,6 @@ def object_results(session: Any, overall: float | None) -> list[dict[str, Any]]:
     ``result`` is ``modelled`` (c_a >= :data:`OBJECT_MODELLED`), ``partial`` (some of it),
     ``not_seen`` (c_a = 0) or ``outside_region`` (its box does not meet the region of interest).
     """
-    from explore.mapping import GroundTruthMetrics
-
     sim = session.sim
     objects = sim.objects()
     points = session.point_history[-1] if session.point_history else np.zeros((0, 3))

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.core import BadInput, brief, load_yaml, valid_names, validate_params
+from explore.runtime.decorators import RepeatUntil
 from explore.sim import repo_root
 
 COMPOSITES = ("sequence", "selector", "parallel")
@@ -217,8 +218,6 @@ def build(node: Node, registry: Any, overrides: dict[str, dict[str, Any]] | None
     the file (``until``, ``items``, ``as``) are relative to the run's ``namespace``.
     """
     import py_trees
-
-    from explore.runtime.decorators import RepeatUntil
 
     overrides = overrides or {}
     if node.type == "behaviour":

@@ -1,0 +1,163 @@
+"""A comparison's grid: the product of worlds x strategies x planners x robots x seeds, each run a RunSpec with a
+stable id (a folder name built from its grid values, so a repeated command finds the runs it already has), and the
+file names of a results folder."""
+
+from __future__ import annotations
+
+import itertools
+import re
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from explore.core import BadInput
+
+RESULTS_FILE = "results.csv"
+
+
+GRID_FILE = "compare.json"
+
+
+RUNS_DIR = "runs"
+
+
+SPEC_FILE = "spec.json"
+
+
+RESULT_FILE = "result.json"
+
+
+ERROR_FILE = "error.json"
+
+
+LOG_FILE = "run.log"
+
+
+DEFAULT = "default"  # column value when the tree's / world's default is used
+
+
+ID_COLUMNS = ("run_id", "world", "strategy", "planner", "robot", "seed", "status", "reason")
+
+
+METRIC_COLUMNS = (
+    "scans",
+    "n_s",
+    "coverage",
+    "coverage_at_stop",
+    "coverage_estimate",
+    "path_length_m",
+    "selection_s_mean",
+    "collisions",
+    "planning_success",
+    "planning_time_s",
+    "elapsed_s",
+    "wall_s",
+    "coverage_per_scan",
+    "coverage_estimate_per_scan",
+    "selection_s_per_scan",
+)
+
+
+# metrics that measure time (differ between machines); everything else is deterministic
+TIMING_COLUMNS = ("elapsed_s", "wall_s", "selection_s_mean", "selection_s_per_scan", "planning_time_s")
+
+
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def slug(value: str | None) -> str:
+    """A folder-safe form of a grid value (``ig_quality/bs_hr`` -> ``ig_quality+bs_hr``)."""
+    if value is None or value == "":
+        return DEFAULT
+    text = Path(value).stem if value.endswith((".yaml", ".yml")) else value
+    return re.sub(r"[^A-Za-z0-9._+-]", "-", text.replace("/", "+"))
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a comparison: everything its isolated process needs."""
+
+    run_id: str
+    tree: str
+    world: str
+    strategy: str | None
+    planner: str | None
+    robot: str | None
+    seed: int
+    out_dir: str
+    max_scans: int | None = None
+    settings: dict[str, Any] = field(default_factory=dict)
+    timeout: float = 1800.0
+    plugins: tuple[str, ...] = ()
+    threads: int = 1
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["plugins"] = list(self.plugins)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunSpec:
+        return cls(**{**data, "plugins": tuple(data.get("plugins", ()))})
+
+    @property
+    def path(self) -> Path:
+        return Path(self.out_dir)
+
+    def grid_values(self) -> dict[str, Any]:
+        return {
+            "run_id": self.run_id,
+            "world": slug(self.world),
+            "strategy": self.strategy or DEFAULT,
+            "planner": self.planner or DEFAULT,
+            "robot": self.robot or DEFAULT,
+            "seed": self.seed,
+        }
+
+
+@dataclass
+class Grid:
+    """The experiment grid of ``explore compare``; :meth:`runs` is its cartesian product."""
+
+    tree: str
+    worlds: list[str]
+    strategies: list[str | None] = field(default_factory=lambda: [None])
+    planners: list[str | None] = field(default_factory=lambda: [None])
+    robots: list[str | None] = field(default_factory=lambda: [None])
+    seeds: list[int] = field(default_factory=lambda: [0])
+    max_scans: int | None = None
+    settings: dict[str, Any] = field(default_factory=dict)
+    timeout: float = 1800.0
+    plugins: list[str] = field(default_factory=list)
+    threads: int = 1
+
+    # fields that change what a run computes: a results folder holds one value of each
+    DEFINING = ("tree", "max_scans", "settings", "plugins", "threads")
+
+    def runs(self, out: Path) -> list[RunSpec]:
+        """Every run, in grid order (world, strategy, planner, robot, seed)."""
+        specs: list[RunSpec] = []
+        seen: dict[str, tuple] = {}
+        product = itertools.product(self.worlds, self.strategies, self.planners, self.robots, self.seeds)
+        for world, strategy, planner, robot, seed in product:
+            key = (world, strategy, planner, robot, seed)
+            run_id = "__".join([slug(world), slug(strategy), slug(planner), slug(robot), f"seed{seed:03d}"])
+            if run_id in seen:
+                raise BadInput("explore compare", None, f"runs {seen[run_id]} and {key} share the id {run_id}")
+            seen[run_id] = key
+            specs.append(
+                RunSpec(
+                    run_id=run_id, tree=self.tree, world=world, strategy=strategy, planner=planner,
+                    robot=robot, seed=seed, out_dir=str((out / RUNS_DIR / run_id).resolve()),
+                    max_scans=self.max_scans, settings=dict(self.settings), timeout=self.timeout,
+                    plugins=tuple(self.plugins), threads=self.threads,
+                )
+            )
+        return specs
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+OnDone = Callable[[RunSpec, dict[str, Any]], None]  # what an executor calls as each run ends
