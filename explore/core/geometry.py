@@ -147,3 +147,17 @@ def parse_vector(text: str, n: int = 3) -> Array:
     if not np.all(np.isfinite(values)):
         raise ValueError(f"{text!r} contains NaN or inf")
     return values
+
+
+def quaternion_xyzw(m: Array) -> list[float]:
+    """Quaternion (x, y, z, w, as pybullet) of a rotation matrix (Shepperd's method)."""
+    t = m[0, 0] + m[1, 1] + m[2, 2]
+    if t > 0:
+        s = math.sqrt(t + 1.0) * 2
+        return [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2]]))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    s = math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k]) * 2
+    q = [0.0, 0.0, 0.0, (m[k, j] - m[j, k]) / s]
+    q[i], q[j], q[k] = 0.25 * s, (m[j, i] + m[i, j]) / s, (m[k, i] + m[i, k]) / s
+    return q

@@ -23,6 +23,7 @@
 """
 
 # The names other packages use (they import from the package, never from its modules).
+from explore.motion.bullet_robot import BulletRobot
 from explore.motion.collision import BulletCollider, Part, self_collision_pairs
 from explore.motion.geometric import OPTIONAL_GEOMETRIC, geometric_planner_names, plan, planner_class, straight_line
 from explore.motion.kernels import rigid_step_hit
@@ -31,8 +32,7 @@ from explore.motion.mobile import PlanarChecker, box_distance, plan_mobile
 from explore.motion.noise import truncated_normal, truncated_normal_logpdf
 from explore.motion.planning_clock import COSTS, WALL_FACTOR, Budget, work_clock
 from explore.motion.problem import MotionProblem, path_is_valid, path_length, validate_path
-from explore.motion.records import CollisionEvent, Execution, MotionPlan
-from explore.motion.robot import Robot
+from explore.motion.records import Execution, MotionPlan
 from explore.motion.scan_paths import (
     BLOCK_OCCUPIED,
     BLOCK_UNKNOWN,
@@ -47,15 +47,14 @@ __all__ = [
     "BLOCK_UNKNOWN",
     "Budget",
     "BulletCollider",
+    "BulletRobot",
     "COSTS",
-    "CollisionEvent",
     "Execution",
     "MotionPlan",
     "MotionProblem",
     "OPTIONAL_GEOMETRIC",
     "Part",
     "PlanarChecker",
-    "Robot",
     "ScanPathIK",
     "WALL_FACTOR",
     "box_distance",
