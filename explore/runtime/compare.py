@@ -95,7 +95,7 @@ def compare(grid: Grid, out: Path, executor: Any, console: Any = None, report: b
     """Run every missing run of ``grid`` with ``executor``; write results.csv and the report."""
     out.mkdir(parents=True, exist_ok=True)
     check_grid_file(out, grid)
-    write_json_atomic(out / GRID_FILE, grid.to_dict())
+    write_json_atomic(out / GRID_FILE, grid.to_dict(), digits=None)
     specs = grid.runs(out)
     rows: dict[str, dict[str, Any]] = {}
     for spec in specs:
@@ -120,7 +120,7 @@ def compare(grid: Grid, out: Path, executor: Any, console: Any = None, report: b
         rows[spec.run_id] = row
         if row["status"] in FINISHED:
             spec.path.mkdir(parents=True, exist_ok=True)
-            write_json_atomic(spec.path / RESULT_FILE, row)
+            write_json_atomic(spec.path / RESULT_FILE, row, digits=None)
         write_results(results, ordered())
         progress.advance(row)
 

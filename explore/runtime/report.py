@@ -86,7 +86,7 @@ def write_report(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
     md += [t.markdown() for t in tables]
     md += [f"![{caption}]({p.name})\n" for p, caption in figures]
     (out / "summary.md").write_text("\n".join(md), encoding="utf-8")
-    write_json_atomic(out / "summary.json", {t.key: {"title": t.title, "rows": t.values} for t in tables})
+    write_json_atomic(out / "summary.json", {t.key: {"title": t.title, "rows": t.values} for t in tables}, digits=None)
     body = [f"<h1>Comparison report</h1><p>{html.escape(header)}</p>"]
     body += [t.html() for t in tables]
     body += [

@@ -66,15 +66,18 @@ class RunConfig:
         return {k[len(head) :]: v for k, v in self.settings.items() if k.startswith(head)}
 
 
-def jsonable(value: Any) -> Any:
+def jsonable(value: Any, digits: int | None = 6) -> Any:
+    """Plain JSON values; floats rounded to ``digits`` decimals (None keeps every digit), NaN/inf as null."""
     if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v, digits) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
+        return [jsonable(v, digits) for v in value]
     if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
+        return jsonable(value.tolist(), digits)
     if isinstance(value, np.floating | float):
-        return None if not np.isfinite(value) else round(float(value), 6)
+        if not np.isfinite(value):
+            return None
+        return float(value) if digits is None else round(float(value), digits)
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, Path):
@@ -205,8 +208,11 @@ def _behaviour_overrides(config: RunConfig, tree_file: Any, registry: Any) -> di
     return overrides
 
 
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON through a temporary file so an interrupt never leaves half a file."""
+def write_json_atomic(path: Path, data: Any, digits: int | None = 6) -> None:
+    """Write JSON through a temporary file so an interrupt never leaves half a file.
+
+    Run metrics keep 6 decimals; a comparison's results and summary keep every digit so
+    they equal what is recomputed from ``results.csv``."""
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(jsonable(data), indent=2) + "\n", encoding="utf-8")
+    tmp.write_text(json.dumps(jsonable(data, digits), indent=2, default=str) + "\n", encoding="utf-8")
     os.replace(tmp, path)
