@@ -160,9 +160,7 @@ def register(app: typer.Typer) -> None:
             option = "--ray-address" if ray_address else "--ray-token-file"
             raise BadInput(option, ray_address or str(ray_token_file), "only applies to --executor ray")
         runner = registry.create("executor", executor, params, "--executor", "executor")
-        check = getattr(runner, "check", None)
-        if check is not None:  # e.g. connect to the cluster before the first run starts
-            check()
+        runner.check()  # e.g. connect to the cluster before the first run starts
         try:
             rows = compare(grid, out, runner, console=console)
         except KeyboardInterrupt as stop:  # SIGINT, or SIGTERM (Terminated)

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from explore.api import Executor
 from explore.core import BadInput, Param, captured_output
 from explore.runtime import OnDone, RunSpec, run_isolated, run_local
 
@@ -28,10 +29,9 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-class LocalExecutor:
+class LocalExecutor(Executor):
     """Local process pool: every run in its own process, ``jobs`` at a time (0 = the cores)."""
 
-    kind = "executor"
     name = "local"
     params = (Param("jobs", int, 0, "", "concurrent runs (0: one per core)", low=0),)
 
@@ -72,7 +72,7 @@ def _reach(address: str, timeout: float = 5.0) -> None:
         raise BadInput("--ray-address", address, f"no Ray head answers there ({error.strerror or error})") from None
 
 
-class RayExecutor:
+class RayExecutor(Executor):
     """Ray tasks: the runs on a Ray cluster (``address``) or a local Ray instance (``jobs`` CPUs).
 
     Each task starts the run's process on its node, so ``--out`` must be a folder that every
@@ -84,7 +84,6 @@ class RayExecutor:
     token the driver connects in token mode (which a cluster without authentication accepts too).
     """
 
-    kind = "executor"
     name = "ray"
     params = (
         Param("address", str, "", "", "Ray cluster address HOST:PORT (empty: start a local instance)"),

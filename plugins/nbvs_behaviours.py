@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Param
+from explore.nbv import AreaFactor
 from explore.runtime import ExploreBehaviour, Outcome, failure, object_result, success
 
 
@@ -212,7 +213,7 @@ class StartNBVS(ExploreBehaviour):
         strategy = ctx.registry.create("strategy", name, config.scoped("strategy"), "--strategy", "strategy").strategy
         expected = strategy.utility == "expected_utility"
         params = dict(strategy.utility_params)
-        utility = str(params.pop("base", "area_factor")) if expected else strategy.utility
+        utility = str(params.pop("base", AreaFactor.name)) if expected else strategy.utility
         k = int(params.pop("k", 100)) if expected else 1
         session = NBVSSession(
             ctx.sim, ctx.registry, utility=utility, expected=expected, k=k, seed=config.seed,
@@ -223,7 +224,7 @@ class StartNBVS(ExploreBehaviour):
             stop_on_collision=self.p["stop_on_collision"], beam_stride=self.p["beam_stride"],
             planner=config.planner,
             planner_params={"time_limit": self.p["planner_time_limit"], **config.scoped("planner")},
-            utility_params={} if expected or utility == "area_factor" else params,
+            utility_params={} if expected or utility == AreaFactor.name else params,
             weighting=self.p["weighting"],
         )
         adapter = TreeNBVS(session, name)

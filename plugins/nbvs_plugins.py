@@ -17,16 +17,16 @@ from typing import Any
 
 import numpy as np
 
+from explore.api import BadInput, Utility
 from explore.core import Param
 from explore.motion import MotionPlan, MotionProblem
 from explore.nbv import Candidate, ObstacleField, PlanningContext, StateSamples, expected_utility
 from explore.sim import ScanPath
 
 
-class ExpectedUtility:
+class ExpectedUtility(Utility):
     """Expected utility (Vasquez-Gomez Alg. 1, k noisy rollouts) around any utility plugin."""
 
-    kind = "utility"
     name = "expected_utility"
     params = (
         Param("base", str, "area_factor", "", "the wrapped utility plugin"),
@@ -35,26 +35,25 @@ class ExpectedUtility:
     )
 
     def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
-        self._base: Any = None
-        self._rng = np.random.default_rng(int(getattr(self, "seed", 0)))
+        super().__init__(**values)
+        self._base: Utility | None = None
+        self._rng = np.random.default_rng(int(self.seed))
 
-    def base_utility(self) -> Any:
-        """The wrapped utility plugin (built on first use from the default registry)."""
+    def base_utility(self, ctx: PlanningContext) -> Utility:
+        """The wrapped utility plugin, built on first use from the session's registry."""
         if self._base is None:
-            from explore.runtime import Registry
-
-            self._base = Registry.load().create("utility", self.base, {}, "<expected_utility>")
+            if ctx.registry is None:
+                raise BadInput("<expected_utility>", "base", "the planning context has no plugin registry")
+            self._base = ctx.registry.create("utility", self.base, {}, "<expected_utility>", "base")
         return self._base
 
     def score(self, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
         robot = ctx.robot
-        base = self.base_utility()
-        if robot is None or getattr(robot, "sim", None) is None:
+        base = self.base_utility(ctx)
+        if robot is None or robot.sim is None:
             return np.asarray(base.score(candidates, ctx), dtype=float)
-        obstacles = ObstacleField(ctx.environment_boxes, ctx.pvs, float(getattr(robot, "clearance", 0.0)))
-        problem = MotionProblem(robot, space_free=getattr(ctx.pvs, "is_free", None))
+        obstacles = ObstacleField(ctx.environment_boxes, ctx.pvs, float(robot.clearance))
+        problem = MotionProblem(robot, space_free=ctx.pvs.is_free)
         start = np.asarray(robot.q, dtype=float)
         out = np.zeros(len(candidates))
         for index, cand in enumerate(candidates):

@@ -16,6 +16,7 @@ from explore.core import Array, BadInput, Param
 from explore.motion import (
     OPTIONAL_GEOMETRIC,
     MotionPlan,
+    MotionPlanner,
     MotionProblem,
     control_planner_names,
     plan,
@@ -46,17 +47,12 @@ _GEOMETRIC = (
 )
 
 
-class GeometricPlanner:
+class GeometricPlanner(MotionPlanner):
     """An OMPL geometric planner in the robot's configuration space."""
 
-    kind = "motion_planner"
     name = "ompl"
     ompl_name = "RRTConnect"
     params: tuple = _GEOMETRIC
-
-    def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
 
     def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
         """A simplified, densely re-checked collision-free path or None."""
@@ -118,10 +114,9 @@ class OmplByName(GeometricPlanner):
         )
 
 
-class Kinodynamic:
+class Kinodynamic(MotionPlanner):
     """Kinodynamic base planner (ompl.control, unicycle/omni model): tuck, drive, untuck; velocity controls."""
 
-    kind = "motion_planner"
     name = "kinodynamic"
     params = (
         Param("time_limit", float, 5.0, "s", "planning time limit (the whole call)", low=0.001),
@@ -138,10 +133,6 @@ class Kinodynamic:
         Param("tuck", bool, True, "", "move the arm to its travel configuration before driving"),
     )
 
-    def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
-
     def plan(self, problem: MotionProblem, start: Array, goal: Array, seed: int | None = None) -> MotionPlan | None:
         """Controls: joints to travel configuration, the base to near ``goal``, joints to ``goal``."""
         return plan_kinodynamic(
@@ -151,10 +142,9 @@ class Kinodynamic:
         )
 
 
-class TuckAndDrive:
+class TuckAndDrive(MotionPlanner):
     """Mobile robots: arm to travel configuration, base path by an OMPL geometric planner, arm to goal."""
 
-    kind = "motion_planner"
     name = "tuck_and_drive"
     params = (
         Param("time_limit", float, 5.0, "s", "planning time limit (the whole call)", low=0.001),
@@ -164,8 +154,7 @@ class TuckAndDrive:
     )
 
     def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
+        super().__init__(**values)
         try:
             planner_class(self.planner)
         except ValueError as error:
@@ -176,10 +165,9 @@ class TuckAndDrive:
         return plan_mobile(problem, start, goal, self.planner, self.time_limit, seed, self.tuck, self.simplify)
 
 
-class StraightLine:
+class StraightLine(MotionPlanner):
     """The straight segment in configuration space if valid (the free flyer's planner)."""
 
-    kind = "motion_planner"
     name = "straight_line"
     params = ()
 

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
+from explore.api import PoseValidator
 from explore.core import Param, Points3, Pose
 from explore.perception import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
 
 
-class PvsVotes:
+class PvsVotes(PoseValidator):
     """PVS votes of the model vertices at the pose: v_h >= 0.66 accepts (Kriegel Eq. 3.11)."""
 
-    kind = "pose_validator"
     name = "pvs_votes"
     params = (
         Param("threshold", float, ACCEPT_FROM, "", "accept if v_h >= threshold (thesis: 0.66)", low=0.0, high=1.0),
@@ -29,10 +29,6 @@ class PvsVotes:
     def validate(self, pvs: Any, model_vertices: Points3, pose: Pose) -> Validation:
         """Score, vertex counts and accept/reject of the model vertices at ``pose`` (world_T_model)."""
         return pvs_votes(pvs, model_vertices, pose, self.threshold, self.free_below, self.occupied_from)
-
-    def validate_hypothesis(self, hypothesis: Any, pvs: Any, model_vertices: Points3) -> Validation:
-        """Same as :meth:`validate` for any hypothesis with a ``pose`` attribute."""
-        return self.validate(pvs, model_vertices, hypothesis.pose)
 
 
 PLUGINS = [PvsVotes]

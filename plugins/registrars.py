@@ -6,6 +6,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from explore.api import Registrar
 from explore.core import Param, Points3, Pose
 from explore.perception import (
     IcpResult,
@@ -19,18 +20,9 @@ from explore.perception import (
 from explore.sim import Scan
 
 
-class _Configured:
-    params: tuple[Param, ...] = ()
-
-    def __init__(self, **values: Any) -> None:
-        for param in self.params:
-            setattr(self, param.name, values.get(param.name, param.default))
-
-
-class Icp(_Configured):
+class Icp(Registrar):
     """Local ICP of a scan to the model: 3 mm radius, 3 iterations, 60 deg normal gate (Kriegel 3.2.3)."""
 
-    kind = "registrar"
     name = "icp"
     params = (
         Param("radius", float, 0.003, "m", "correspondence radius (bottom scans: 20 mm)", low=1e-6),
@@ -50,11 +42,11 @@ class Icp(_Configured):
         )
 
 
-class PlaneIcp(_Configured):
+class PlaneIcp(Registrar):
     """Goerner's Plane ICP: snap to the table plane, then 2-D (x, y, yaw) ICP with 3-D correspondences."""
 
-    kind = "registrar"
     name = "plane_icp"
+    role = "plane"
     params = (
         Param("radius", float, 0.05, "m", "maximum correspondence distance (Goerner: 5 cm)", low=1e-6),
         Param("fine_radius", float, 0.01, "m", "second, fine stage (0 = single stage)", low=0.0),
@@ -69,11 +61,11 @@ class PlaneIcp(_Configured):
         return plane_icp(source, target, plane, source_plane, init, radius=radii, iterations=self.iterations)
 
 
-class PoseGraphRegistrar(_Configured):
+class PoseGraphRegistrar(Registrar):
     """gtsam pose graph over a run's scans: odometry + pairwise ICP + loop closures, robust LM."""
 
-    kind = "registrar"
     name = "pose_graph"
+    role = "scans"
     params = (
         Param("voxel", float, 0.01, "m", "finest ICP voxel (coarse-to-fine x4, x2, x1)", low=1e-4),
         Param("priors", str, "odometry", "", "relative odometry factors (mobile base) or absolute kinematic priors",

@@ -24,6 +24,7 @@ from explore.core import Array, Param, Pose, pose_error, quaternion_xyzw, wrap_a
 from explore.motion import (
     BulletCollider,
     BulletRobot,
+    Capability,
     Part,
     self_collision_pairs,
 )
@@ -213,11 +214,18 @@ class _ArmChain:
         return q
 
 
+def _declare_laser(robot: BulletRobot) -> None:
+    """A base with ``laser_height`` > 0 carries the planar localisation laser."""
+    if robot.laser_height > 0:
+        robot.capabilities = robot.capabilities | {Capability.PLANAR_LASER}
+
+
 class Arm(BulletRobot):
     """Fixed industrial arm (KUKA iiwa, 7 DOF) with an eye-in-hand sensor; IK with restarts."""
 
     name = "arm"
     dof = 7
+    capabilities = frozenset({Capability.ARM, Capability.POSITIONING_NOISE})
     params = (
         Param("urdf", str, "kuka_iiwa/model.urdf", "", "arm URDF (pybullet_data path)"),
         Param("flange_link", str, "lbr_iiwa_link_7", "", "link the sensor is mounted on"),
@@ -313,6 +321,9 @@ class MobileManipulator(BulletRobot):
     name = "mobile_manipulator"
     dof = 10
     base_dofs = (0, 1, 2)
+    capabilities = frozenset({Capability.ARM, Capability.MOBILE_BASE, Capability.TRAVEL_POSE,
+                              Capability.POSITIONING_NOISE})
+    default_planner = "tuck_and_drive"  # no geometric planner finds its way among furniture in 10-D
     params = (
         Param("urdf", str, "kuka_iiwa/model.urdf", "", "arm URDF (pybullet_data path)"),
         Param("flange_link", str, "lbr_iiwa_link_7", "", "link the sensor is mounted on"),
@@ -329,6 +340,10 @@ class MobileManipulator(BulletRobot):
         *_BASE,
         *_COMMON,
     )
+
+    def __init__(self, **values: Any) -> None:
+        super().__init__(**values)
+        _declare_laser(self)
 
     def attach(self, sim: Simulation) -> None:
         super().attach(sim)
@@ -465,6 +480,7 @@ class MobileBase(BulletRobot):
     name = "mobile_base"
     dof = 5
     base_dofs = (0, 1, 2)
+    capabilities = frozenset({Capability.MOBILE_BASE, Capability.POSITIONING_NOISE})
     params = (
         Param("base_size", list, [0.5, 0.5, 0.3], "m", "base box (length, width, height)", length=3),
         Param("ground_clearance", float, 0.02, "m", "gap below the base box", low=0.0),
@@ -484,6 +500,7 @@ class MobileBase(BulletRobot):
         self.dof = 5 if values.get("pan_tilt", True) else 3
         super().__init__(**values)
         self.weights = list(self.weights)[: self.dof]
+        _declare_laser(self)
 
     def attach(self, sim: Simulation) -> None:
         super().attach(sim)
@@ -583,6 +600,7 @@ class FreeFlyer(BulletRobot):
 
     name = "free_flyer"
     dof = 6
+    capabilities = frozenset({Capability.FREE_FLYER, Capability.POSITIONING_NOISE})
     params = (
         Param("radius", float, 0.03, "m", "collision sphere around the sensor", low=0.0),
         Param("speed", float, 0.1, "m/s", "nominal translation speed for execution", low=1e-4),

@@ -9,68 +9,12 @@ defaults.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
-
-from explore.core import Param
+from explore.api import OVERRIDES, Param, Strategy, StrategyPlugin, make_strategy
 
 
-@dataclass
-class Strategy:
-    """A resolved strategy: plugin names and parameters of its three parts."""
-
-    name: str
-    generator: str
-    utility: str
-    termination: str
-    generator_params: dict[str, Any] = field(default_factory=dict)
-    utility_params: dict[str, Any] = field(default_factory=dict)
-    termination_params: dict[str, Any] = field(default_factory=dict)
-
-    def build(self, registry: Any) -> tuple[Any, Any, Any]:
-        """Create the generator, utility and termination plugins."""
-        src = f"strategy {self.name}"
-        return (
-            registry.create("view_generator", self.generator, self.generator_params, src, "generator"),
-            registry.create("utility", self.utility, self.utility_params, src, "utility"),
-            registry.create("termination", self.termination, self.termination_params, src, "termination"),
-        )
-
-
-OVERRIDES = (
-    Param("generator_params", dict, {}, "", "overrides of the view generator's parameters"),
-    Param("utility_params", dict, {}, "", "overrides of the utility's parameters"),
-    Param("termination_params", dict, {}, "", "overrides of the termination's parameters"),
-)
-
-
-def make_strategy(name: str, doc: str, generator: str, utility: str, termination: str,
-                  generator_params: dict | None = None, utility_params: dict | None = None,
-                  termination_params: dict | None = None) -> type:
-    """A strategy plugin class with fixed parts and default parameters."""
-
-    def __init__(self: Any, generator_params: dict, utility_params: dict, termination_params: dict) -> None:
-        self.strategy = Strategy(
-            name, generator, utility, termination,
-            {**(defaults[0] or {}), **generator_params},
-            {**(defaults[1] or {}), **utility_params},
-            {**(defaults[2] or {}), **termination_params},
-        )
-
-    defaults = (generator_params, utility_params, termination_params)
-    cls = type(
-        "Strategy_" + name.replace("/", "_"),
-        (),
-        {"kind": "strategy", "name": name, "params": OVERRIDES, "__doc__": doc, "__init__": __init__,
-         "parts": (generator, utility, termination), "defaults": defaults},
-    )
-    return cls
-
-
-class Custom:
+class Custom(StrategyPlugin):
     """Any generator + utility + termination given by name."""
 
-    kind = "strategy"
     name = "custom"
     params = (
         Param("generator", str, "boundary_hole", "", "view generator plugin"),
@@ -123,14 +67,14 @@ IROS = [
                   "boundary_hole", "information_gain", "coverage_target", {}, {}, dict(IROS_TARGET)),
 ]
 
-class VasquezEU:
+class VasquezEU(StrategyPlugin):
     """Vasquez-Gomez expected utility (Algorithm 1, k noisy rollouts) of pos reg sur dist over random views."""
 
-    kind = "strategy"
     name = "vasquez/eu"
     params = (Param("k", int, 100, "", "rollouts per candidate (Eq. 18: k >= 90 for alpha 0.01, gamma 0.05)",
                     low=1),) + OVERRIDES
     parts = ("random", "expected_utility", "unknown_below")
+    defaults = ({"count": 40}, {"base": "area_factor", "k": 100}, {})
 
     def __init__(self, k: int, generator_params: dict, utility_params: dict, termination_params: dict) -> None:
         self.strategy = Strategy(self.name, *self.parts, {"count": 40, **generator_params},

@@ -6,29 +6,9 @@ the last selection's diagnostics, unknown-voxel counts), never the ground truth.
 
 from __future__ import annotations
 
-from typing import Any
-
+from explore.api import Termination
 from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Param, reaches
 from explore.nbv import CONTINUE, STOP, SWITCH, Decision, PlanningContext
-
-
-class Termination:
-    """Base class: ``decide(ctx) -> Decision``."""
-
-    kind = "termination"
-    name = "termination"
-    params: tuple = ()
-
-    def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the state of a previous run."""
-
-    def decide(self, ctx: PlanningContext) -> Decision:
-        raise NotImplementedError
 
 
 class MaxScans(Termination):

@@ -8,16 +8,13 @@ one shared numba pass (:mod:`explore.mapping.visibility`), then combine the accu
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from explore.core import Param, Points3
+from explore.api import RAY_PARAMS, AreaFactor, RayUtility, Utility, beams_of, non_free_count
+from explore.core import Param
 from explore.mapping import (
-    ACC_NAMES,
     ENTROPY,
     HITS,
-    OCC_FIRST,
     OCCLUSION,
     PROXIMITY,
     QUAL_LIT,
@@ -25,114 +22,10 @@ from explore.mapping import (
     REAR_ENTROPY,
     REAR_VOXEL,
     TRAVERSED,
-    UNK_FIRST,
     UNKNOWN_VOXELS,
     UNOBSERVED,
-    TraceSettings,
-    trace,
 )
-from explore.nbv import Candidate, PlanningContext, collision_free_share
-from explore.sim import ScanPath
-
-RAY_PARAMS = (
-    Param("beam_stride", int, 4, "", "use every n-th beam of a stripe / pixel (thesis: every 4th)", low=1),
-    Param("frame_spacing", float, 0.006, "m", "distance between simulated stripes along a path", low=1e-4),
-    Param("visited", bool, True, "", "count each voxel once per candidate (thesis visited marking)"),
-    Param("hierarchy", int, 0, "",
-          "hierarchical ray tracing level a (0 = uniform; Vasquez-Gomez HRT: 2^a x 2^a bundles, coarse pass first)",
-          low=0, high=4),
-)
-
-
-class Utility:
-    """Base class: ``score(candidates, ctx) -> (n,) array``; higher is better."""
-
-    kind = "utility"
-    name = "utility"
-    params: tuple = ()
-
-    def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
-
-    def score(self, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
-        raise NotImplementedError
-
-
-def candidate_beams(sensor: Any, cand: Candidate, beam_stride: int, frame_spacing: float) -> tuple[Points3, Points3]:
-    """Origins and directions of one candidate's simulated beams, cached on the candidate.
-
-    Candidates are immutable once generated and persistent ones (the sphere) are scored in
-    every iteration, so the beams are computed once per (stride, spacing).
-    """
-    key = (beam_stride, frame_spacing)
-    cached = cand.beams_cache
-    if cached is not None and cached[0] == key:
-        return cached[1], cached[2]
-    stride = 1
-    if isinstance(cand.target, ScanPath):
-        per_frame = cand.target.speed / max(sensor.rate_hz, 1e-9)
-        stride = max(1, int(round(frame_spacing / max(per_frame, 1e-9))))
-    o, d, _ = sensor.beams(cand.target, beam_stride=beam_stride, frame_stride=stride)
-    cand.beams_cache = (key, o, d)
-    return o, d
-
-
-def beams_of(ctx: PlanningContext, candidates: list[Candidate], beam_stride: int,
-             frame_spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Origins, directions and candidate index of the simulated beams of every candidate."""
-    origins, dirs, groups = [], [], []
-    for index, cand in enumerate(candidates):
-        o, d = candidate_beams(ctx.sensor, cand, beam_stride, frame_spacing)
-        origins.append(o)
-        dirs.append(d)
-        groups.append(np.full(len(o), index, dtype=np.int64))
-    if not origins:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    return np.vstack(origins), np.vstack(dirs), np.concatenate(groups)
-
-
-class RayUtility(Utility):
-    """A utility computed from simulated beams (see :mod:`explore.mapping.visibility`)."""
-
-    params = RAY_PARAMS
-
-    def settings(self) -> TraceSettings:
-        return TraceSettings(visited=bool(getattr(self, "visited", True)), hierarchy=int(getattr(self, "hierarchy", 0)),
-                             lam=float(getattr(self, "lam", 0.7)),
-                             incidence_deg=float(getattr(self, "incidence_deg", 70.0)))
-
-    def accumulate(self, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
-        """Accumulators (n, N_ACC) of the candidates' simulated beams."""
-        origins, dirs, groups = beams_of(ctx, candidates, self.beam_stride, self.frame_spacing)
-        sensor = ctx.sensor
-        min_range = 0.0 if getattr(sensor, "clear_from_origin", True) else sensor.min_range
-        per_frame = len(sensor.local_directions()[:: self.beam_stride])
-        acc = trace(ctx.grid, origins, dirs, groups, len(candidates), min_range, sensor.max_range,
-                    self.settings(), per_frame)
-        for cand, row in zip(candidates, acc, strict=True):
-            cand.diagnostics.update({name: float(v) for name, v in zip(ACC_NAMES, row, strict=True)})
-        return acc
-
-    def score(self, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
-        if not candidates:
-            return np.zeros(0)
-        acc = self.accumulate(candidates, ctx)
-        values = self.combine(acc, candidates, ctx)
-        for cand, value in zip(candidates, values, strict=True):
-            cand.diagnostics["utility"] = float(value)
-        return values
-
-    def combine(self, acc: np.ndarray, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
-        raise NotImplementedError
-
-
-def non_free_count(ctx: PlanningContext) -> int:
-    """N_v (thesis Eq. 4.32): voxels that are not free."""
-    pvs = ctx.pvs
-    if hasattr(pvs, "non_free_count"):
-        return max(1, int(pvs.non_free_count()))
-    return max(1, int(np.count_nonzero(ctx.grid.prob >= 0.05)))
+from explore.nbv import Candidate, PlanningContext
 
 
 class RandomUtility(Utility):
@@ -228,40 +121,6 @@ class IGQuality(RayUtility):
         for cand, e, m in zip(candidates, e_v, modelling, strict=True):
             cand.diagnostics.update({"e_v": float(e), "modelling_term": float(m), "omega": w})
         return (1.0 - w) * e_v + w * modelling
-
-
-class AreaFactor(RayUtility):
-    """Vasquez-Gomez deterministic utility pos * reg * sur * dist (Eq. 4-8) with overlap h."""
-
-    name = "area_factor"
-    params = RAY_PARAMS + (
-        Param("overlap", float, 0.5, "", "registration factor: oc_o / (oc_o + un_o) > h (sim 50 %, real 65 %)",
-              low=0.0, high=1.0),
-        Param("clearance", float, 0.02, "m", "positioning factor: sensor clearance from non-free voxels", low=0.0),
-        Param("rotation_weight", float, 0.05, "m/rad", "distance factor: metres per radian of rotation", low=0.0),
-        Param("tie_break", float, 1e-6, "", "added w * sur so that all-zero products still rank by sur", low=0.0),
-    )
-
-    def combine(self, acc: np.ndarray, candidates: list[Candidate], ctx: PlanningContext) -> np.ndarray:
-        occ, unk = acc[:, OCC_FIRST], acc[:, UNK_FIRST]
-        un_total = max(1.0, float(np.count_nonzero((ctx.grid.prob >= 0.25) & (ctx.grid.prob < 0.75))))
-        reg = (occ / np.maximum(occ + unk, 1.0) > self.overlap).astype(float)
-        sur = unk / un_total
-        pos = np.array([float(collision_free_share(ctx.grid, c.target, self.clearance,
-                                                   environment_boxes=ctx.environment_boxes) == 1.0)
-                        for c in candidates])
-        here = ctx.sensor_pose if ctx.sensor_pose is not None else np.eye(4)
-        dist = []
-        for cand in candidates:
-            start = cand.start
-            rho = float(np.linalg.norm(start[:3, 3] - here[:3, 3]))
-            cosang = np.clip((np.trace(here[:3, :3].T @ start[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
-            rho += self.rotation_weight * float(np.arccos(cosang))
-            dist.append(1.0 / (1.0 + rho))
-        dist = np.asarray(dist)
-        for cand, r, s, p in zip(candidates, reg, sur, pos, strict=True):
-            cand.diagnostics.update({"reg": float(r), "sur": float(s), "pos": float(p)})
-        return pos * reg * sur * dist + self.tie_break * pos * sur
 
 
 class OcclusionAware(RayUtility):

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from explore.api import ViewGenerator
 from explore.core import Array, Param, Points3, fibonacci_sphere
 from explore.mapping import first_blocked
 from explore.nbv import (
@@ -26,27 +27,6 @@ from explore.nbv import (
     segments_hit_boxes,
 )
 from explore.sim import ScanPath
-
-
-class ViewGenerator:
-    """Base class: ``generate(ctx) -> list[Candidate]``; ``reset()`` before a new run."""
-
-    kind = "view_generator"
-    name = "view_generator"
-    params: tuple = ()
-    #: sources whose candidates the stack must never drop as stale (fixed search spaces)
-    persistent = False
-
-    def __init__(self, **values: Any) -> None:
-        for key, value in values.items():
-            setattr(self, key, value)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the state of a previous run."""
-
-    def generate(self, ctx: PlanningContext) -> list[Candidate]:
-        raise NotImplementedError
 
 
 def _standoff(ctx: PlanningContext, value: float) -> float:

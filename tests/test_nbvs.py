@@ -181,7 +181,7 @@ def _free_flyer_context(sim, registry):
     return PlanningContext(pvs=pvs, surface=None, grid=grid, sensor=sim.sensor, robot=sim.robot,
                            region_min=np.asarray(sim.spec.region_min), region_max=np.asarray(sim.spec.region_max),
                            environment_boxes=[tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object],
-                           rng=np.random.default_rng(0))
+                           rng=np.random.default_rng(0), registry=registry)
 
 
 def test_expected_utility_plugin_wraps_any_utility(registry) -> None:

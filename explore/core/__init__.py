@@ -28,6 +28,7 @@ from explore.core.outcomes import BUDGET, FAILURE, FINISHED, INTERRUPTED, NO_CAN
 from explore.core.output_paths import check_output
 from explore.core.params import Param, parse_assignment, validate_params
 from explore.core.pictures import equal_axes, plt, save_curves_png, save_mesh_png, save_points_png
+from explore.core.plugin import Plugin
 from explore.core.typed import Array, Points3, Pose
 from explore.core.user_files import load_yaml, read_text
 
@@ -42,6 +43,7 @@ __all__ = [
     "MissionFailed",
     "NO_CANDIDATES",
     "Param",
+    "Plugin",
     "Points3",
     "Pose",
     "RegistryError",

@@ -30,9 +30,11 @@ from explore.motion.kernels import rigid_step_hit
 from explore.motion.kinodynamic import control_planner_names, plan_kinodynamic
 from explore.motion.mobile import PlanarChecker, box_distance, plan_mobile
 from explore.motion.noise import truncated_normal, truncated_normal_logpdf
+from explore.motion.planner import MotionPlanner
 from explore.motion.planning_clock import COSTS, WALL_FACTOR, Budget, work_clock
 from explore.motion.problem import MotionProblem, path_is_valid, path_length, validate_path
 from explore.motion.records import Execution, MotionPlan
+from explore.motion.robot import Capability, Robot
 from explore.motion.scan_paths import (
     BLOCK_OCCUPIED,
     BLOCK_UNKNOWN,
@@ -49,12 +51,15 @@ __all__ = [
     "BulletCollider",
     "BulletRobot",
     "COSTS",
+    "Capability",
     "Execution",
     "MotionPlan",
+    "MotionPlanner",
     "MotionProblem",
     "OPTIONAL_GEOMETRIC",
     "Part",
     "PlanarChecker",
+    "Robot",
     "ScanPathIK",
     "WALL_FACTOR",
     "box_distance",

@@ -6,6 +6,7 @@ world. The built-in robot plugins subclass it; so can a third party's."""
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -56,8 +57,6 @@ class BulletRobot(Robot):
 
     def __init__(self, **values: Any) -> None:
         super().__init__(**values)
-        self.lower = np.full(self.dof, -np.inf)
-        self.upper = np.full(self.dof, np.inf)
         self.parts: list[Part] = []
         self.collider: BulletCollider | None = None
         self._local_points: list[tuple[Part, Points3]] = []
@@ -80,8 +79,9 @@ class BulletRobot(Robot):
         self._set_state(q)
         self._state = q.copy()
 
+    @abstractmethod
     def _set_state(self, q: Array) -> None:
-        raise NotImplementedError
+        """Move the pybullet bodies to ``q`` (uncached; :meth:`set_config` caches)."""
 
     def part_pose(self, part: Part) -> Pose:
         """world_T_link of a part in the current pybullet state."""
@@ -182,24 +182,12 @@ class BulletRobot(Robot):
         """True if the robot at ``q`` collides (or is closer than ``margin``) with ``world``."""
         return bool(self.collisions(q, world, self.clearance if margin is None else margin))
 
-    def within_limits(self, q: Array) -> bool:
-        q = np.asarray(q)
-        return bool(np.all(q >= self.lower - 1e-9) and np.all(q <= self.upper + 1e-9))
-
     def distance(self, a: Array, b: Array) -> float:
         """Weighted configuration distance (Vasquez-Gomez Eq. 8): sqrt(sum_j w_j (a_j - b_j)^2)."""
         d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
         return float(np.sqrt(np.sum(np.asarray(self.weights) * d * d)))
 
-    def sample_config(self, rng: np.random.Generator) -> Array:
-        """A uniform configuration within the limits (not checked for collisions)."""
-        return rng.uniform(self.lower, self.upper)
-
     # -- controls and execution --------------------------------------------------------------
-    @property
-    def joint_dofs(self) -> list[int]:
-        return [i for i in range(self.dof) if i not in self.base_dofs]
-
     def base_control_limits(self) -> Array:
         """Max |u| of the base controls: (v, omega) differential, (vx, vy, omega) omni."""
         if self.drive == "differential":

@@ -132,7 +132,7 @@ class BaseProblem:
     def __init__(self, problem: MotionProblem, carried: Array, goal: Array, lower: Array, upper: Array) -> None:
         self.problem, self.robot = problem, problem.robot
         ends = [carried[list(problem.robot.base_dofs)], goal]  # the drive's start and goal base poses
-        self.checker = PlanarChecker(problem, carried, drive_margin=float(getattr(self.robot, "drive_clearance", 0.0)),
+        self.checker = PlanarChecker(problem, carried, drive_margin=float(self.robot.drive_clearance),
                                      ends=ends)
         self.checker.lower, self.checker.upper = lower, upper
         self.lower, self.upper = lower, upper
@@ -186,7 +186,7 @@ def _carried_joints(problem: MotionProblem, start: Array, goal: Array, tuck: boo
     base = list(robot.base_dofs)
     joints = [i for i in range(len(start)) if i not in base]
     options = [start[joints], goal[joints]]
-    travel = getattr(robot, "travel_joints", None)
+    travel = robot.travel_joints
     if tuck and travel is not None and joints:
         options.insert(0, np.asarray(travel, dtype=float))
     out: list[Array] = []

@@ -43,7 +43,7 @@ class MotionProblem:
     ) -> None:
         self.robot = robot
         self.space_free = space_free
-        self.margin = float(getattr(robot, "clearance", 0.0) if margin is None else margin)
+        self.margin = float(robot.clearance if margin is None else margin)
         self.resolution = float(resolution)  # max configuration step (L2) between checks
         self.checks = 0
         self.space_bounds = space_bounds if space_bounds is not None else _free_outside_box(space_free)

@@ -3,6 +3,7 @@ Vasquez-Gomez view/state planning.
 """
 
 # The names other packages use (they import from the package, never from its modules).
+from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import (
     BETAS_DEG,
     CONTINUE,
@@ -16,7 +17,6 @@ from explore.nbv.candidates import (
     above_support,
     any_sweep,
     clip_above,
-    collision_free_share,
     frame_from,
     make_target,
     path_over,
@@ -28,34 +28,47 @@ from explore.nbv.expected_utility import ObstacleField, StateSamples, expected_u
 from explore.nbv.modelling import ModellingSession
 from explore.nbv.modelling_records import resolve_strategy
 from explore.nbv.nbvs import NBVSSession
-from explore.nbv.scan_planning import DEFAULT_PLANNER
-from explore.nbv.view_states import STAGES, ViewRecord, default_planner
+from explore.nbv.strategy import OVERRIDES, Strategy, StrategyPlugin, make_strategy
+from explore.nbv.termination import Termination
+from explore.nbv.utility import RAY_PARAMS, RayUtility, Utility, beams_of, candidate_beams, non_free_count
+from explore.nbv.view_generator import ViewGenerator
+from explore.nbv.view_states import STAGES, ViewRecord
 
 __all__ = [
+    "AreaFactor",
     "BETAS_DEG",
     "CONTINUE",
     "Candidate",
     "CandidateStack",
-    "DEFAULT_PLANNER",
     "Decision",
     "ModellingSession",
     "NBVSSession",
+    "OVERRIDES",
     "ObstacleField",
     "PlanningContext",
+    "RAY_PARAMS",
+    "RayUtility",
     "RepairSettings",
     "STAGES",
     "STOP",
     "SWITCH",
     "StateSamples",
+    "Strategy",
+    "StrategyPlugin",
+    "Termination",
+    "Utility",
+    "ViewGenerator",
     "ViewRecord",
     "above_support",
     "any_sweep",
+    "beams_of",
+    "candidate_beams",
     "clip_above",
-    "collision_free_share",
-    "default_planner",
     "expected_utility",
     "frame_from",
+    "make_strategy",
     "make_target",
+    "non_free_count",
     "path_over",
     "repair",
     "resolve_strategy",

@@ -153,6 +153,7 @@ class PlanningContext:
     best_score_diagnostics : diagnostics of the last selected candidate
     rng : the session's random generator
     support_margin : how far below the support plane (the region floor) a sensor may go
+    registry : the plugin registry (for plugins that build the plugins they wrap)
     """
 
     pvs: Any
@@ -176,6 +177,7 @@ class PlanningContext:
     available: int = 0  # candidates on the stack before the last selection
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     support_margin: float = 0.02
+    registry: Any = None
 
     @property
     def region_centre(self) -> Array:

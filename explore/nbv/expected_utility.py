@@ -118,7 +118,7 @@ def rollout_batch(robot: Any, start: Array, controls: np.ndarray, eps: np.ndarra
     controls = np.asarray(controls, dtype=float)
     k, m = eps.shape[0], len(controls)
     dt = float(robot.dt)
-    base = list(getattr(robot, "base_dofs", ()))
+    base = list(robot.base_dofs)
     joints = list(robot.joint_dofs)
     nb = int(robot.n_base_controls)
     lower, upper = np.asarray(robot.lower)[joints], np.asarray(robot.upper)[joints]
@@ -231,17 +231,16 @@ def expected_utility(
             ObstacleField([], None)
     start, controls = plan_controls(robot, plan)
     sigma = np.asarray(robot.control_sigma(), dtype=float)
-    beta = float(getattr(robot, "truncation", 3.0))
+    beta = float(robot.truncation)
     m = len(controls)
     eps = truncated_normal(rng, sigma, k * m, beta).reshape(k, m, len(sigma)) if m else np.zeros((k, 0, len(sigma)))
     eps[:, :, sigma <= 0] = 0.0
-    mask = getattr(robot, "noise_mask", None)
-    active = np.ones((m, len(sigma)), dtype=bool) if mask is None else np.asarray(mask(controls), dtype=bool)
+    active = np.asarray(robot.noise_mask(controls), dtype=bool)
     eps *= active[None]  # no error on the controls of parts commanded to stand still
     log_prob = np.array([truncated_normal_logpdf(eps[i], sigma, beta, active) for i in range(k)])
     configs = rollout_batch(robot, start, controls, eps)
     nominal = rollout_batch(robot, start, controls, np.zeros((1, m, len(sigma))))[0]
-    base = list(getattr(robot, "base_dofs", ()))
+    base = list(robot.base_dofs)
     joints = list(robot.joint_dofs)
     rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
     local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration

@@ -35,7 +35,7 @@ import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Pose
 from explore.mapping import GroundTruthMetrics, VoxelGrid
-from explore.motion import Execution
+from explore.motion import Capability, Execution
 from explore.nbv.candidates import STOP, Candidate, CandidateStack, Decision, PlanningContext, frame_from
 from explore.nbv.modelling_metrics import Evaluation
 from explore.nbv.modelling_planning import CandidatePlanning
@@ -79,7 +79,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
     max_plan_attempts : candidates tried per iteration when planning the best one fails
     place_first : put the robot at the first scan instead of planning a motion to it (the
         thesis' free-flying sensor starts at its random initial scan path); None = only for
-        the ``free_flyer`` robot
+        a robot with the FREE_FLYER capability
     register_scans : :meth:`step` registers each scan to the model (:meth:`register`, the
         thesis' local ICP) before integrating it, as the ``register_scan`` behaviour does
     region : (min corner, max corner) of the box to model instead of the world's region (scene
@@ -122,7 +122,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         self.ctx = PlanningContext(
             pvs=self.pvs, surface=self.surface, grid=self._snapshot(), sensor=self.sensor, robot=self.robot,
             region_min=region_min, region_max=region_max, environment_boxes=self._environment_boxes(),
-            stack=self.stack, rng=self.rng_plan,
+            stack=self.stack, rng=self.rng_plan, registry=registry,
         )
         self.records: list[ScanRecord] = []
         self.scans: list[Scan] = []
@@ -138,7 +138,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         self._metrics: GroundTruthMetrics | None = None
         self.max_plan_attempts = max(1, int(max_plan_attempts))
         self.register_scans = bool(register_scans)
-        self.place_first = (getattr(self.robot, "name", "") == "free_flyer") if place_first is None else place_first
+        self.place_first = self.robot.has(Capability.FREE_FLYER) if place_first is None else place_first
         self.motion = ScanMotion(self.robot, self.pvs, make_planner(registry, self.robot, planner),
                                  np.random.default_rng(rng.integers(2**63)), int(rng.integers(1, 2**31 - 1)),
                                  noise=bool(noise))

@@ -42,17 +42,19 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Pose, wrap_angle
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Pose, validate_params, wrap_angle
 from explore.motion import (
+    Capability,
     Execution,
     MotionProblem,
 )
+from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import PlanningContext
 from explore.nbv.expected_utility import ObstacleField
 from explore.nbv.nbvs_report import Reporting
 from explore.nbv.nbvs_sampling import StateSampling
 from explore.nbv.nbvs_scoring import Scoring
-from explore.nbv.view_states import STAGES, FixedBeams, ViewRecord, ViewState, default_planner
+from explore.nbv.view_states import STAGES, FixedBeams, ViewRecord, ViewState
 
 
 class NBVSSession(Reporting, Scoring, StateSampling):
@@ -71,8 +73,8 @@ class NBVSSession(Reporting, Scoring, StateSampling):
 
     Parameters
     ----------
-    utility : utility plugin for the view part of g (default ``area_factor``: reg * sur of
-        Eq. 5-6; any other plugin's score is multiplied by dist of Eq. 7)
+    utility : utility plugin for the view part of g (default: the paper's :class:`AreaFactor`,
+        reg * sur of Eq. 5-6; any other plugin's score is multiplied by dist of Eq. 7)
     expected : score with the expected utility (EU, Algorithm 1) instead of DU
     k : samples of Algorithm 1
     n_samples : sampled states whose director ray hits the region, per iteration (10 000: the
@@ -86,17 +88,17 @@ class NBVSSession(Reporting, Scoring, StateSampling):
     rounds : rounds of ``top`` candidates tried while none is feasible (paper: 1; see :meth:`next_round`)
     overlap : registration threshold h (paper: 0.5 in simulation)
     resolution : PVS voxel size (paper: 2 cm octree; 1 cm here for a 15 cm bunny)
-    planner, planner_params : motion planner plugin; default ``tuck_and_drive`` (3 s) for a
-        robot with a base (arm to travel configuration, turn-drive-turn base path, arm to the
-        goal: executable controls, as the paper's kinodynamic RRT gives), else
-        ``rrt_connect`` (1 s, straight segment first)
+    planner, planner_params : motion planner plugin; default the robot's ``default_planner``
+        (the mobile manipulator's ``tuck_and_drive``: arm to travel configuration,
+        turn-drive-turn base path, arm to the goal: executable controls, as the paper's
+        kinodynamic RRT gives); time limit 3 s for a robot with a mobile base, else 1 s
     beam_stride : every n-th camera beam is simulated for visibility
     noise : execute with the robot's positioning noise (the "-MU" variants)
     min_unknown : candidates must see this many unknown voxels (paper's stop: 30)
     weighting : "probability" (Algorithm 1: E(G) = sum g_i eta P_i) or "mean" (sample mean)
     """
 
-    def __init__(self, sim: Any, registry: Any, utility: str = "area_factor", expected: bool = True,
+    def __init__(self, sim: Any, registry: Any, utility: str | None = None, expected: bool = True,
                  k: int = 100, n_samples: int = 10000, bases_per_arm: int = 200, top: int = 25, overlap: float = 0.5,
                  resolution: float = 0.01, planner: str | None = None, planner_params: dict | None = None,
                  max_views: int = 12, seed: int = 0, beam_stride: int = 8, noise: bool = True,
@@ -121,16 +123,16 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         self.pvs = PVS.for_region(self.region_min, self.region_max, resolution)
         self.obstacles = ObstacleField.from_sim(sim, self.pvs)
         self.problem = MotionProblem(self.robot, space_free=self.pvs.is_free)
-        view_params = {"beam_stride": int(beam_stride), "overlap": self.overlap}
-        self.visibility = registry.create("utility", "area_factor", view_params, "<nbvs>")
-        self.utility_name = utility
-        if utility == "area_factor":
+        self.visibility = AreaFactor(**validate_params(
+            AreaFactor.params, {"beam_stride": int(beam_stride), "overlap": self.overlap}, "<nbvs>"))
+        self.utility_name = utility or AreaFactor.name
+        if self.utility_name == AreaFactor.name:  # the paper's g (Eq. 4-8)
             self.utility = self.visibility
         else:
             self.utility = registry.create("utility", utility, utility_params or {}, "<nbvs>")
-        planner = planner or default_planner(self.robot)
+        planner = planner or self.robot.default_planner
         declared = {p.name for p in registry.get("motion_planner", planner).params}
-        defaults = {"time_limit": 3.0 if planner == "tuck_and_drive" else 1.0, "try_direct": True}
+        defaults = {"time_limit": 3.0 if self.robot.has(Capability.MOBILE_BASE) else 1.0, "try_direct": True}
         params = {k: v for k, v in {**defaults, **(planner_params or {})}.items()
                   if k in declared or k not in defaults}  # generic settings only where the planner has them
         self.planner_name = planner
@@ -142,7 +144,7 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         self.ctx = PlanningContext(pvs=self.pvs, surface=None, grid=self._snapshot(), sensor=FixedBeams(self.sensor),
                                    robot=self.robot, region_min=self.region_min, region_max=self.region_max,
                                    environment_boxes=[tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object],
-                                   rng=np.random.default_rng(rng.integers(2**63)))
+                                   rng=np.random.default_rng(rng.integers(2**63)), registry=registry)
         self.q = np.asarray(self.robot.q, dtype=float).copy()
         self.points: list[np.ndarray] = []
         self.records: list[ViewRecord] = []

@@ -43,6 +43,7 @@ from explore.core import Array, Pose, wrap_angle
 from explore.motion import (
     BLOCK_OCCUPIED,
     BLOCK_UNKNOWN,
+    Capability,
     Execution,
     MotionPlan,
     MotionProblem,
@@ -58,7 +59,6 @@ from explore.sim import ScanPath
 
 OK, UNREACHABLE, OCCUPIED, UNKNOWN, NO_PATH = "ok", "unreachable", "occupied", "unknown", "no_path"
 KEEP_FOR_LATER = (UNKNOWN, NO_PATH)  # verdicts that leave the candidate on the stack
-DEFAULT_PLANNER = "rrt_connect"  # tries the straight line first (try_direct), plans around what blocks it
 
 
 @dataclass
@@ -196,7 +196,7 @@ class ScanMotion:
     def capability(self) -> CapabilityMap | None:
         """The capability map of a fixed-base arm (built on first use); None for other robots."""
         robot = self.robot
-        if getattr(robot, "base_dofs", ()) or getattr(robot, "name", "") == "free_flyer" or not hasattr(robot, "fk"):
+        if robot.has(Capability.MOBILE_BASE) or not robot.has(Capability.ARM):
             return None
         if self._capability is None:
             self._capability = CapabilityMap(robot, np.random.default_rng(self.plan_seed))
@@ -290,7 +290,7 @@ class ScanMotion:
         if approach is None:
             plan.verdict, plan.reason = NO_PATH, f"no collision-free motion to the scan start ({self.planner_name})"
             return plan
-        if approach.controls is None and getattr(robot, "base_dofs", ()):
+        if approach.controls is None and robot.base_dofs:
             approach = self._drivable(approach, problem)
             if approach is None:
                 plan.verdict, plan.reason = NO_PATH, "the base cannot follow the path without a collision"
@@ -331,7 +331,7 @@ class ScanMotion:
 
     def _near_heading(self, configs: np.ndarray, start: Array) -> np.ndarray | None:
         """Shift a mobile base's heading by 2 pi k to the one closest to the start (within limits)."""
-        base = list(getattr(self.robot, "base_dofs", ()))
+        base = list(self.robot.base_dofs)
         if not base:
             return configs
         th = base[2]
@@ -423,13 +423,13 @@ class ScanMotion:
 def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--planner") -> Any:
     """A motion-planner plugin from a name, (name or None, params), an object, or None.
 
-    A missing name means :data:`DEFAULT_PLANNER`.
+    A missing name means the robot's ``default_planner``.
     """
     params: dict = {}
     if isinstance(planner, tuple):
         planner, params = planner
     if planner is None:
-        planner = DEFAULT_PLANNER
+        planner = robot.default_planner
     if isinstance(planner, str):
         return registry.create("motion_planner", planner, params or {}, source, "planner")
     return planner

@@ -19,12 +19,6 @@ STAGES = (
 )
 
 
-def default_planner(robot: Any) -> str:
-    """``tuck_and_drive`` for a robot with a mobile base (no geometric planner finds its way
-    among furniture in the full 10-D space: benchmarks/planners.py), else ``rrt_connect``."""
-    return "tuck_and_drive" if getattr(robot, "base_dofs", ()) else "rrt_connect"
-
-
 # -- the view/state planning loop ------------------------------------------------------------
 @dataclass
 class ViewState:

@@ -3,6 +3,7 @@ object database.
 """
 
 # The names other packages use (they import from the package, never from its modules).
+from explore.perception.contracts import PoseValidator, Recognizer, Registrar, Segmenter
 from explore.perception.database import ObjectDatabase, default_path, object_frame
 from explore.perception.fpfh import FPFHRansacRecognizer
 from explore.perception.fusion import FusedPose, fuse_poses
@@ -19,6 +20,7 @@ from explore.perception.segmentation import (
     Cloud,
     Cluster,
     PlaneClusterSegmenter,
+    Segmentation,
     Table,
     euclidean_clusters,
     merge_clusters,
@@ -45,7 +47,12 @@ __all__ = [
     "PlaneClusterSegmenter",
     "PoseGraph",
     "PoseGraphResult",
+    "PoseValidator",
     "Q_H_MIN",
+    "Recognizer",
+    "Registrar",
+    "Segmentation",
+    "Segmenter",
     "Table",
     "VFHRecognizer",
     "Validation",

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Pose
+from explore.perception.contracts import Recognizer
 from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model, ScanSource, accepted
 from explore.perception.model_data import ModelCloud
 from explore.perception.segmentation import Cluster
@@ -23,10 +24,9 @@ from explore.perception.verification import (
 from explore.sim import Scan
 
 
-class RecognizerBase:
+class RecognizerBase(Recognizer):
     """Shared plumbing: model caching, verification and refinement."""
 
-    kind = "recognizer"
     name = "base"
     descriptor_kind = ""
 

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose, open3d_serial
+from explore.perception.contracts import Segmenter
 from explore.perception.normals import estimate_normals
 from explore.sim import Scan
 
@@ -269,10 +270,9 @@ class Cloud:
         return Cloud(self.points[mask], self.origins[mask], self.views[mask], self.beams[mask])
 
 
-class PlaneClusterSegmenter:
+class PlaneClusterSegmenter(Segmenter):
     """Support plane by RANSAC, table hull prism, Euclidean clusters (Görner Ch. 3)."""
 
-    kind = "segmenter"
     name = "plane_clusters"
 
     def __init__(

@@ -7,7 +7,8 @@ from explore.runtime.behaviour import ExploreBehaviour, Outcome, failure, succes
 from explore.runtime.compare import compare
 from explore.runtime.compare_grid import RESULTS_FILE, Grid, OnDone, RunSpec
 from explore.runtime.compare_results import complete_metrics, read_results
-from explore.runtime.hookspecs import hookimpl
+from explore.runtime.executor import Executor
+from explore.runtime.hookspecs import ENTRY_POINT_GROUP, hookimpl
 from explore.runtime.isolated_runs import make_registry, run_isolated, run_local
 from explore.runtime.outputs import ModellingOutputs, object_result, tree_dot, write_tree_diagram
 from explore.runtime.registry import KINDS, Registry
@@ -19,6 +20,8 @@ from explore.runtime.rundiff import comparable, differences, load_run, run_diffe
 from explore.runtime.trees import build, find_tree, list_trees, load_tree
 
 __all__ = [
+    "ENTRY_POINT_GROUP",
+    "Executor",
     "ExploreBehaviour",
     "Grid",
     "KINDS",

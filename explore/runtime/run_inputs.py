@@ -22,7 +22,6 @@ from explore.core import (
     validate_params,
 )
 from explore.mapping import check_grid
-from explore.nbv import DEFAULT_PLANNER, default_planner
 from explore.runtime.rerun_log import check_rerun
 from explore.runtime.trees import load_tree
 from explore.sim import load_world_spec
@@ -136,10 +135,8 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     overrides = _behaviour_overrides(config, tree_file, registry)
     spec = load_world_spec(config.world)
     robot = config.robot or spec.robot.plugin
-    planner = config.planner or DEFAULT_PLANNER
-    if "start_nbvs" in {node.behaviour for node in tree_file.root.walk()}:  # view/state planning picks by base
-        where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
-        planner = config.planner or default_planner(registry.get("robot", robot, *where).factory)
+    where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
+    planner = config.planner or registry.get("robot", robot, *where).factory.default_planner
     chosen = {
         "strategy": config.strategy,
         "motion_planner": planner,

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose, invert
+from explore.motion import Capability
 from explore.sim import ScanPath
 
 Target = Pose | ScanPath
@@ -113,13 +114,12 @@ class Mover:
         self.min_path_fraction = float(min_path_fraction)
         self.rng = np.random.default_rng(seed)
         self.pvs: Any = None
-        self.free_flyer = self.robot is None or self.robot.name == "free_flyer"
+        self.free_flyer = self.robot is None or self.robot.has(Capability.FREE_FLYER)
         self.planner = None
         if not self.free_flyer:
-            default = "tuck_and_drive" if hasattr(self.robot, "travel_joints") else "rrt_connect"
-            self.planner = registry.create("motion_planner", planner or default,
+            self.planner = registry.create("motion_planner", planner or self.robot.default_planner,
                                            {"time_limit": planning_time}, "<scene>")
-        self.base_dofs: tuple[int, ...] = tuple(getattr(self.robot, "base_dofs", ()) or ())
+        self.base_dofs: tuple[int, ...] = () if self.robot is None else tuple(self.robot.base_dofs)
         self.believed_q: Array | None = None if self.robot is None else np.asarray(self.robot.q, dtype=float).copy()
         self.travel_m = 0.0
         self.collisions = 0
@@ -147,7 +147,7 @@ class Mover:
     def plausible(self, eye: Array, focus: Array) -> bool:
         """Cheap pre-filter before IK: a fixed-base arm only sees objects from its own side
         (its eye is not farther from the base than the object); anything else passes."""
-        base = getattr(self.robot, "base_pose", None)
+        base = None if self.robot is None else self.robot.base_pose
         if self.free_flyer or self.base_dofs or base is None:
             return True
         here = np.asarray(base)[:2, 3]
@@ -183,14 +183,13 @@ class Mover:
         view's scan is recorded at: the arm joints are measured, so the robot knows where its
         laser is relative to its camera); None without a laser. Görner's robot localises
         with such a scanner (AMCL)."""
-        height = float(getattr(self.robot, "laser_height", 0.0) or 0.0)
-        if not self.base_dofs or height <= 0.0:
+        if not self.base_dofs or not self.robot.has(Capability.PLANAR_LASER):
             return None
         ix, iy, ith = self.base_dofs
         q = np.asarray(self.robot.q, dtype=float)
         angles = q[ith] + np.linspace(0.0, 2.0 * math.pi, beams, endpoint=False)
         directions = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(beams)])
-        origins = np.tile([q[ix], q[iy], height], (beams, 1))
+        origins = np.tile([q[ix], q[iy], float(self.robot.laser_height)], (beams, 1))
         distance, _, _ = self.sim.raycaster.cast(origins, directions)
         hit = np.isfinite(distance) & (distance <= float(self.robot.laser_range))
         measured = distance[hit] + rng.normal(0.0, float(self.robot.laser_sigma), int(hit.sum()))
@@ -256,7 +255,7 @@ class Mover:
         metres with sigma_omega = 0.28 rad/s ends decimetres off its path (Vasquez-Gomez
         Sec. A6). A correction that cannot be planned is skipped (the leg goes on open loop).
         """
-        leg_length = float(getattr(self.robot, "replan_distance", 0.0) or 0.0)
+        leg_length = float(self.robot.replan_distance)
         collisions = 0
         while True:
             leg, rest = (plan, None) if leg_length <= 0.0 or not self.base_dofs else \
@@ -343,7 +342,7 @@ class Mover:
         sideways over the distance driven."""
         if not self.base_dofs or not self.noise or len(execution.controls) == 0:
             return
-        dt = float(getattr(self.robot, "dt", 0.05))
+        dt = float(self.robot.dt)
         steps = len(execution.controls)
         sigma = np.asarray(execution.sigma, dtype=float)
         rot_var = float((sigma[self.robot.n_base_controls - 1] * dt) ** 2 * steps)

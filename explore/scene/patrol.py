@@ -40,7 +40,7 @@ def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, s
     """One exploration step of Görner's surround-point view planning; the views taken."""
     robot = scene.sim.robot
     here = scene.mover.believed_pose()
-    height = getattr(robot, "camera_height", None)
+    height = robot.camera_height
     if height is None:  # sensors without a mast: eyes 0.6 m above the table top
         height = float(focus[2]) + 0.6
     start = 0.0 if here is None else math.atan2(here[1, 3] - focus[1], here[0, 3] - focus[0])

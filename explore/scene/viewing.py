@@ -102,7 +102,7 @@ class ViewTaking:
         distance = viewing_distance(scene.sim.sensor, extent)
         near = viewing_distance(scene.sim.sensor, extent, far=0.0)
         ladder = [d for d in (distance, 0.75 * distance, 0.5 * distance) if d >= near] or [distance]
-        height = getattr(scene.sim.robot, "camera_height", None)
+        height = scene.sim.robot.camera_height
         rings = [views_around(centre, d, camera_height=height)[0] for d in ladder]
         seen = np.array([scene.views[v].believed[:3, 3] for v in obj.cluster.view_ids])
         directions = 0

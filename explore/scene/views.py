@@ -46,7 +46,7 @@ def overview_targets(spec: Any, sensor: Any, robot: Any = None) -> list[Target]:
         return [look_at(eye, target)]
     target = np.array([centre[0], centre[1], lo[2]])
     size = float(np.linalg.norm(hi[:2] - lo[:2]))
-    height = getattr(robot, "camera_height", None)
+    height = robot.camera_height
     out = []
     for azimuth in (-90.0, 180.0, 0.0, 90.0):
         a = math.radians(azimuth)

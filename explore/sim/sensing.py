@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core import Array, Points3, Pose
+from explore.core import Array, Plugin, Points3, Pose
 from explore.sim.scan import Scan, ScanPath
 
 if TYPE_CHECKING:
@@ -46,17 +46,19 @@ def noise_sigma(model: str, d: Array, scale: float = 1.0) -> Array:
     raise ValueError(f"unknown noise model {model!r} (valid: {', '.join(NOISE_MODELS)})")
 
 
-class RaySensor(ABC):
-    """Base class of the simulated range sensors.
+class RaySensor(Plugin, ABC):
+    """Contract of kind ``sensor``: a simulated range sensor.
 
-    Subclasses set ``geometry`` ("area" or "line"), the working range, the beam directions
-    (:meth:`local_directions`) and the frame rate.
+    Subclasses set ``geometry`` ("area": one frame per view; "line": a stripe swept along a
+    :class:`~explore.sim.scan.ScanPath`), the working range ``min_range``/``max_range`` (m), the
+    beam directions (:meth:`local_directions`, unit vectors in the sensor frame: OpenCV, z along
+    the optical axis) and ``rate_hz``. The noise model is theirs to choose: :meth:`sigma` (the
+    range standard deviation the PVS assumes) and :meth:`measure` (the measured ranges from the
+    true ones). Acquisition (:meth:`acquire`) casts every beam against the ground truth.
     """
 
     kind = "sensor"
-    name = "ray_sensor"
     geometry = "area"
-    params = ()
 
     min_range: float
     max_range: float
@@ -118,11 +120,7 @@ class RaySensor(ABC):
         cos_incidence = np.abs(np.einsum("ij,ij->i", normals, directions))
         grazing = cos_incidence < np.cos(np.deg2rad(self.max_incidence_deg))
         valid = np.isfinite(t_hit) & (t_hit >= self.min_range) & (t_hit <= self.max_range) & ~grazing
-        ranges = np.where(valid, t_hit, np.nan)
-        if self.noise != "none":
-            sig = self.sigma(np.nan_to_num(ranges))
-            ranges = ranges + rng.normal(0.0, 1.0, size=ranges.shape) * sig
-            ranges[(ranges < self.min_range) | (ranges > self.max_range)] = np.nan
+        ranges = self.measure(np.where(valid, t_hit, np.nan), cos_incidence, rng)
         sigmas = np.where(np.isfinite(ranges), self.sigma(np.nan_to_num(ranges)), np.nan)
         return Scan(
             origins=origins,
@@ -139,6 +137,17 @@ class RaySensor(ABC):
             sensor=self.name,
             colors=self.colors(sim, poses) if getattr(self, "color", False) else None,
         )
+
+    def measure(self, ranges: Array, cos_incidence: Array, rng: np.random.Generator) -> Array:
+        """Measured ranges (n,) from the true ones (NaN: no return) and |cos| of the incidence
+        angles (n,); NaN where the measurement leaves the working range. Default: Gaussian
+        noise of :meth:`sigma` (``noise`` model, ``noise_scale``)."""
+        if self.noise == "none":
+            return ranges
+        sig = self.sigma(np.nan_to_num(ranges))
+        ranges = ranges + rng.normal(0.0, 1.0, size=ranges.shape) * sig
+        ranges[(ranges < self.min_range) | (ranges > self.max_range)] = np.nan
+        return ranges
 
     def colors(self, sim: Simulation, poses: np.ndarray) -> np.ndarray | None:
         return None
