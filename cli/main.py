@@ -65,6 +65,37 @@ def _register_subcommands() -> None:
 _register_subcommands()
 
 
+def _builtin_command_names() -> set[str]:
+    names = {group.name for group in app.registered_groups}
+    for command in app.registered_commands:
+        names.add(command.name or command.callback.__name__.replace("_", "-"))
+    return names
+
+
+_plugin_commands_added = False
+
+
+def plugin_commands(argv: list[str]) -> None:
+    """Add the sub-commands of plugin packages (their ``explore_register_commands`` hook).
+
+    Loaded only when the command line names no built-in command (a plugin's command, help,
+    or a mistake), so the built-in commands start as fast as without plugins. A package whose
+    hook fails is named in one line; the other commands still work.
+    """
+    global _plugin_commands_added
+    first = next((arg for arg in argv if not arg.startswith("-")), None)
+    if _plugin_commands_added or (first is not None and first in _builtin_command_names()):
+        return
+    _plugin_commands_added = True
+    manager = registry().manager
+    for impl in manager.hook.explore_register_commands.get_hookimpls():
+        try:
+            impl.function(app=app)
+        except Exception as error:  # noqa: BLE001 - one broken package must not break the CLI
+            err_console.print(f"warning: plugin {impl.plugin_name}: its commands failed to load: "
+                              f"{type(error).__name__}: {error}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI and return its exit code.
 
@@ -74,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     os.environ.setdefault("PYTHONWARNINGS", "ignore")
     try:
+        plugin_commands(sys.argv[1:] if argv is None else argv)
         result = app(args=argv, prog_name="explore", standalone_mode=False)
     except BadInput as error:
         return _error_line(f"error: {error.line()}", 2)

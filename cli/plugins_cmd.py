@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated
 
 import typer
@@ -29,12 +30,15 @@ def register(app: typer.Typer) -> None:
         for column in ("kind", "name", "origin", "doc"):
             table.add_column(column)
         for info in reg.of_kind(kind):
-            table.add_row(info.kind, info.name, info.origin, info.doc)
+            clash = reg.clashes.get((info.kind, info.name))
+            origin = " + ".join(clash) + " (clash: unusable)" if clash else info.origin
+            table.add_row(info.kind, info.name, origin, info.doc)
             if params:
+                effective = reg.effective_defaults(info)
                 for p in info.params:
-                    table.add_row("", "", "", f"  {p.describe()}")
+                    table.add_row("", "", "", f"  {dataclasses.replace(p, default=effective[p.name]).describe()}")
         console.print(table)
         for name, error in reg.load_errors.items():
-            console.print(f"could not load plugin {name}: {error}", style="yellow")
+            console.print(f"could not load plugin package {name}: {error}", style="yellow")
 
     app.add_typer(sub, name="plugins")

@@ -41,10 +41,52 @@ class _Plugin:
         register(_Duplicate)
 
 
-def test_duplicate_names_fail_with_both_origins() -> None:
+def test_a_name_clash_fails_only_lookups_of_that_name_with_both_origins() -> None:
+    reg = Registry.load(extra=[("thirdparty", _Plugin())])
+    assert reg.clashes == {("sensor", "laser_striper"): ["explore-nbv", "thirdparty"]}
     with pytest.raises(RegistryError) as error:
-        Registry.load(extra=[("thirdparty", _Plugin())])
-    assert "registered twice: by explore-nbv and by thirdparty" in error.value.line()
+        reg.create("sensor", "laser_striper", {}, "world.yaml", "sensor")
+    assert "laser_striper' is registered by explore-nbv and thirdparty" in error.value.line()
+    assert reg.create("sensor", "depth_camera", {}).width == 320  # every other plugin still works
+
+
+def test_a_package_that_failed_to_load_is_named_with_its_error(registry) -> None:
+    reg = Registry.load()
+    reg.load_errors["acme-nbv:plugins"] = "ModuleNotFoundError: No module named 'acme_missing'"
+    with pytest.raises(RegistryError) as error:
+        reg.get("strategy", "acme/fast", "--strategy")
+    line = error.value.line()
+    assert "unknown strategy 'acme/fast'" in line
+    assert "acme-nbv:plugins failed to load (ModuleNotFoundError: No module named 'acme_missing')" in line
+
+
+def test_defaults_are_declared_by_plugin_packages_and_a_third_party_one_wins() -> None:
+    class _Defaults:
+        @hookimpl
+        def explore_register_plugins(self, register) -> None:
+            register.default("recognizer", "vfh_mean_distance")
+
+    assert Registry.load().default("recognizer") == ("ppf", {})
+    assert Registry.load().default("registrar", "scans") == ("pose_graph", {})
+    reg = Registry.load(extra=[("acme", _Defaults())])
+    assert reg.default("recognizer") == ("vfh_mean_distance", {})
+    with pytest.raises(RegistryError, match="no installed plugin package declares a default segmenter for x"):
+        reg.default("segmenter", "x")
+
+
+def test_every_plugin_subclasses_the_public_contract_of_its_kind(registry) -> None:
+    from explore.api import CONTRACTS
+
+    for info in registry.of_kind():
+        assert issubclass(info.factory, CONTRACTS[info.kind]), (info.kind, info.name)
+
+
+def test_plugins_list_params_shows_a_strategys_effective_defaults(registry) -> None:
+    info = registry.get("strategy", "ig/bs_hr")
+    values = registry.effective_defaults(info)
+    assert values["utility_params"]["omega"] == 0.0  # the strategy's override
+    assert values["utility_params"]["beam_stride"] == 4  # the utility's own default
+    assert values["termination_params"]["coverage"] == 0.8
 
 
 class _Extra:

@@ -54,7 +54,8 @@ class Robot(Plugin, ABC):
     dof : configuration size; ``q`` (dof,) is the current (true) configuration
     lower, upper : (dof,) joint limits (m or rad; +-inf for unbounded)
     capabilities : the :class:`Capability` set this robot declares
-    default_planner : the motion planner plugin its moves use when a run names none
+    default_planner : the motion planner plugin its moves use when a run names none ("": the
+        registry's default motion planner)
     base_dofs : indices (x, y, theta) of a mobile base in ``q``; empty without one
     base_pose : world_T_base of a fixed base (None when the base moves or there is none)
     dt : seconds each velocity control is held during execution
@@ -70,7 +71,7 @@ class Robot(Plugin, ABC):
     kind = "robot"
     dof: int = 0
     capabilities: frozenset[Capability] = frozenset()
-    default_planner: ClassVar[str] = "rrt_connect"
+    default_planner: ClassVar[str] = ""
     base_dofs: tuple[int, ...] = ()
     base_pose: Pose | None = None
     dt: float = 0.05

@@ -277,7 +277,8 @@ class ModellingSession(Evaluation, CandidatePlanning):
         model = self.surface.mesh
         if len(model.vertices) < 50 or not scan.hits.any():
             return scan, None
-        registrar = registrar or self.registry.create("registrar", "icp", {}, "<session>")
+        registrar = registrar or self.registry.create("registrar", *self.registry.default("registrar", "scan_to_model"),
+                                                      "<session>")
         points, normals = scan_points_and_normals(scan)
         result = registrar.register(points, normals, model.vertices, self.surface.vertex_normals)
         transform = result.transformation

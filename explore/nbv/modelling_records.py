@@ -44,7 +44,10 @@ class ModellingResult:
 
 
 def resolve_strategy(strategy: Any, registry: Any) -> Any:
-    """A :class:`explore_plugins.strategies.Strategy` from a name, (name, params) or an object."""
+    """A :class:`~explore.nbv.strategy.Strategy` from a name, (name, params), an object or None
+    (the registry's default strategy)."""
+    if strategy is None:
+        strategy = registry.default("strategy")
     if isinstance(strategy, str):
         return registry.create("strategy", strategy, {}, "<strategy>").strategy
     if isinstance(strategy, tuple):

@@ -1,8 +1,8 @@
 """Every hook that a plugin package can implement (pluggy project name ``explore``).
 
 A package declares the entry point group ``explore.plugins`` pointing at a module (or
-object) with ``@hookimpl`` functions, exactly as :mod:`explore_plugins` does for the
-built-ins. Hook implementations must not give their parameters default values.
+object) with ``@hookimpl`` functions (``from explore.api import hookimpl``), exactly as the
+built-in plugin package does. Hook implementations must not give their parameters default values.
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ class Specs:
         ``factory`` is a class or callable that takes the validated parameters as keyword
         arguments. ``kind``, ``name`` and ``params`` default to the factory's attributes of
         the same names; the one-line doc is the first line of its docstring.
+        ``register.default(kind, name, params=None, role="")`` declares the plugin the library
+        uses where a run names none (a third-party default replaces a built-in one).
         """
 
     @hookspec

@@ -59,6 +59,10 @@ class Registry:
 
     plugins: dict[tuple[str, str], PluginInfo] = field(default_factory=dict)
     load_errors: dict[str, str] = field(default_factory=dict)
+    #: (kind, name) -> every origin that registered it, when more than one did (that name is unusable)
+    clashes: dict[tuple[str, str], list[str]] = field(default_factory=dict)
+    #: (kind, role) -> (plugin name, parameters, origin): the choice where a run names none
+    defaults: dict[tuple[str, str], tuple[str, dict[str, Any], str]] = field(default_factory=dict)
     manager: pluggy.PluginManager | None = None
 
     @classmethod
@@ -92,11 +96,8 @@ class Registry:
             pm.register(plugin, name=name)
             origins[name] = dist
         if not any(d == BUILTIN_DISTRIBUTION for d in origins.values()):
-            # running from a source tree that was never installed: register built-ins directly
-            import explore_plugins
-
-            pm.register(explore_plugins, name=f"{BUILTIN_DISTRIBUTION}:builtins")
-            origins[f"{BUILTIN_DISTRIBUTION}:builtins"] = BUILTIN_DISTRIBUTION
+            registry.load_errors[BUILTIN_DISTRIBUTION] = (
+                "the built-in plugins are not installed (run ./run.sh setup, or pip install -e . in the source tree)")
         for name, plugin in extra:
             pm.register(plugin, name=name)
             origins[name] = name
@@ -107,6 +108,15 @@ class Registry:
         return registry
 
     def _registrar(self, origin: str) -> Callable[..., PluginInfo]:
+        def default(kind: str, name: str, params: Mapping[str, Any] | None = None, role: str = "") -> None:
+            """Declare ``name`` (with ``params``) the plugin of ``kind`` the library uses for ``role``
+            when a run names none; a built-in default yields to a third-party one."""
+            held = self.defaults.get((kind, role))
+            if held is not None and held[2] != BUILTIN_DISTRIBUTION and origin != BUILTIN_DISTRIBUTION:
+                raise RegistryError(origin, f"default {kind} {role!r}", f"declared twice: by {held[2]} and by {origin}")
+            if held is None or held[2] == BUILTIN_DISTRIBUTION:
+                self.defaults[(kind, role)] = (name, dict(params or {}), origin)
+
         def register(
             factory: Callable[..., Any],
             kind: str | None = None,
@@ -125,16 +135,24 @@ class Registry:
             doc = doc if isinstance(doc, str) else (doc[0] if doc else "")
             info = PluginInfo(kind, name, factory, params, doc, origin)
             existing = self.plugins.get((kind, name))
-            if existing is not None:
-                raise RegistryError(
-                    origin,
-                    f"{kind} {name!r}",
-                    f"registered twice: by {existing.origin} and by {origin}",
-                )
+            if existing is not None:  # only the commands that use this name fail (get() says why)
+                origins = self.clashes.setdefault((kind, name), [existing.origin])
+                origins.append(origin)
+                return info
             self.plugins[(kind, name)] = info
             return info
 
+        register.default = default  # type: ignore[attr-defined]
         return register
+
+    def default(self, kind: str, role: str = "") -> tuple[str, dict[str, Any]]:
+        """(name, parameters) of the plugin a package declared the default of ``kind`` for ``role``."""
+        try:
+            name, params, _ = self.defaults[(kind, role)]
+        except KeyError:
+            what = f"{kind} for {role}" if role else kind
+            raise RegistryError("<plugins>", kind, f"no installed plugin package declares a default {what}") from None
+        return name, dict(params)
 
     def names(self, kind: str) -> list[str]:
         """Sorted names of the plugins of one kind."""
@@ -144,10 +162,16 @@ class Registry:
         """The plugin (kind, name); an unknown name fails with the list of valid names."""
         if kind not in KINDS:
             raise RegistryError(source, field, f"unknown plugin kind {kind!r} (valid: {', '.join(KINDS)})")
+        if (kind, name) in self.clashes:
+            origins = " and ".join(self.clashes[(kind, name)])
+            raise RegistryError(source, field, f"{kind} {brief(name)} is registered by {origins}: uninstall or "
+                                "rename one (or block a package with EXPLORE_BLOCK_PLUGINS)")
         try:
             return self.plugins[(kind, name)]
         except KeyError:
             hint = valid_names(name, self.names(kind), f"`explore plugins list --kind {kind}`")
+            broken = "; ".join(f"{package} failed to load ({error})" for package, error in self.load_errors.items())
+            hint = f"{hint}; {broken}" if broken else hint
             raise RegistryError(source, field, f"unknown {kind} {brief(name)} {hint}") from None
 
     def create(
@@ -166,6 +190,21 @@ class Registry:
             return info.factory(**values)
         except ValueError as error:  # a plugin's own consistency check on its parameters
             raise BadInput(source, f"{field or kind} {name}", str(error)) from None
+
+    def effective_defaults(self, info: PluginInfo) -> dict[str, Any]:
+        """The parameter values a plugin gets when a run sets none. A strategy's ``*_params`` are
+        its parts' own defaults with the strategy's overrides merged over them."""
+        values = {p.name: p.default for p in info.params}
+        parts, overrides = getattr(info.factory, "parts", None), getattr(info.factory, "defaults", None)
+        if info.kind != "strategy" or not parts or overrides is None:
+            return values
+        for key, kind, name, override in zip(("generator_params", "utility_params", "termination_params"),
+                                              ("view_generator", "utility", "termination"), parts, overrides,
+                                              strict=True):
+            part = self.plugins.get((kind, name))
+            own = {p.name: p.default for p in part.params} if part is not None else {}
+            values[key] = {**own, **(override or {})}
+        return values
 
     def of_kind(self, kind: str | None = None) -> list[PluginInfo]:
         """Plugins sorted by kind and name, optionally of one kind only."""

@@ -60,9 +60,21 @@ class RunConfig:
         return self.settings.get(key, default)
 
     def scoped(self, prefix: str) -> dict[str, Any]:
-        """Settings ``prefix.name=value`` as {name: value}."""
+        """Settings ``prefix.name=value`` as {name: value}; a dotted name reaches into a mapping
+        parameter (``strategy.utility_params.jitter=0.05`` -> {"utility_params": {"jitter": 0.05}})."""
         head = f"{prefix}."
-        return {k[len(head) :]: v for k, v in self.settings.items() if k.startswith(head)}
+        out: dict[str, Any] = {}
+        for key, value in self.settings.items():
+            if not key.startswith(head):
+                continue
+            *parents, leaf = key[len(head):].split(".")
+            node = out
+            for part in parents:
+                child = node.get(part)
+                node[part] = dict(child) if isinstance(child, dict) else {}
+                node = node[part]
+            node[leaf] = value
+        return out
 
 
 def jsonable(value: Any, digits: int | None = 6) -> Any:
@@ -134,9 +146,10 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     tree_file = load_tree(config.tree, registry)
     overrides = _behaviour_overrides(config, tree_file, registry)
     spec = load_world_spec(config.world)
-    robot = config.robot or spec.robot.plugin
+    robot = config.robot or spec.robot.plugin or registry.default("robot", "world")[0]
     where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
-    planner = config.planner or registry.get("robot", robot, *where).factory.default_planner
+    planner = (config.planner or registry.get("robot", robot, *where).factory.default_planner
+               or registry.default("motion_planner")[0])
     chosen = {
         "strategy": config.strategy,
         "motion_planner": planner,

@@ -142,7 +142,10 @@ def environment_reference(sim: Any, spacing: float = 0.02, min_height: float = 0
     return out[np.sort(np.unique(keys, axis=0, return_index=True)[1])] if len(out) else out
 
 
-def _plugin(registry: Any, kind: str, spec: Any) -> Any:
+def _plugin(registry: Any, kind: str, spec: Any, role: str = "") -> Any:
+    """A plugin from a name, (name, params), an object, or None (the registry's default for ``role``)."""
+    if spec is None:
+        spec = registry.default(kind, role)
     if isinstance(spec, str):
         return registry.create(kind, spec, {}, "<scene>", kind)
     if isinstance(spec, tuple):

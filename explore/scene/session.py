@@ -89,7 +89,7 @@ class SceneSession:
         self.segmenter = _plugin(registry, "segmenter", settings.segmenter)
         self.recognizer = _plugin(registry, "recognizer", settings.recognizer)
         self.validator = _plugin(registry, "pose_validator", settings.validator)
-        self.registrar = _plugin(registry, "registrar", settings.registrar)
+        self.registrar = _plugin(registry, "registrar", settings.registrar, "scans")
         self.progress = progress
         lo = np.asarray(sim.spec.region_min, dtype=float)
         hi = np.asarray(sim.spec.region_max, dtype=float)

@@ -37,11 +37,11 @@ class SceneSettings:
         the views, the clusters and the PVS with it)
     """
 
-    segmenter: Any = ("plane_clusters", {"scale": "table"})
-    recognizer: Any = "ppf"
-    validator: Any = "pvs_votes"
-    registrar: Any = "pose_graph"
-    strategy: Any = ("ig_quality/bs_hr", {})
+    segmenter: Any = None
+    recognizer: Any = None
+    validator: Any = None
+    registrar: Any = None
+    strategy: Any = None
     seed: int = 0
     resolution: float | None = None
     max_views: int = 80

@@ -98,7 +98,7 @@ class Simulation:
         name, params = sensor or (self.spec.sensor.plugin, self.spec.sensor.params)
         self.sensor = registry.create("sensor", name, params, file, "sensor")
         name, params = robot or (self.spec.robot.plugin, self.spec.robot.params)
-        self.robot = registry.create("robot", name, params, file, "robot")
+        self.robot = registry.create("robot", name or registry.default("robot", "world")[0], params, file, "robot")
         if hasattr(self.robot, "attach"):
             self.robot.attach(self)
 
@@ -266,7 +266,8 @@ class Simulation:
             "file": str(self.spec.path),
             "description": self.spec.description,
             "bodies": rows,
-            "robot": {"plugin": self.spec.robot.plugin, "params": self.spec.robot.params},
+            "robot": {"plugin": self.spec.robot.plugin or getattr(self.robot, "name", ""),
+                      "params": self.spec.robot.params},
             "sensor": {"plugin": self.spec.sensor.plugin, "params": self.spec.sensor.params},
             "region": {"min": self.spec.region_min.tolist(), "max": self.spec.region_max.tolist()},
         }

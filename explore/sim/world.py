@@ -270,7 +270,7 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
     region.check_unknown()
     if np.any(rmax <= rmin):
         raise BadInput(file, "region", "max must be greater than min on every axis")
-    robot = _plugin(f.get("robot", "free_flyer"), file, "robot")
+    robot = _plugin(f.get("robot", ""), file, "robot")  # "": the registry's default robot
     sensor = _plugin(f.get("sensor"), file, "sensor")
     overview = None
     if f.has("overview"):
