@@ -33,7 +33,7 @@ from explore.motion.noise import truncated_normal, truncated_normal_logpdf
 from explore.motion.planner import MotionPlanner
 from explore.motion.planning_clock import COSTS, WALL_FACTOR, Budget, work_clock
 from explore.motion.problem import MotionProblem, path_is_valid, path_length, validate_path
-from explore.motion.records import Execution, MotionPlan
+from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Capability, Robot
 from explore.motion.scan_paths import (
     BLOCK_OCCUPIED,
@@ -52,6 +52,7 @@ __all__ = [
     "BulletRobot",
     "COSTS",
     "Capability",
+    "CollisionEvent",
     "Execution",
     "MotionPlan",
     "MotionPlanner",
