@@ -1,0 +1,71 @@
+"""The public plugin API: one module, a contract per kind, documented, and layering enforced."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_kind_has_a_contract_in_the_api() -> None:
+    import explore.api as api
+    from explore.runtime import KINDS
+
+    assert set(api.CONTRACTS) == set(KINDS)
+    for name in api.__all__:
+        assert hasattr(api, name), name
+
+
+def test_a_plugin_that_leaves_out_part_of_its_contract_cannot_be_built() -> None:
+    from explore.api import Utility
+
+    class Incomplete(Utility):
+        name = "incomplete"
+
+    with pytest.raises(TypeError, match="abstract method"):
+        Incomplete()
+
+
+def test_writing_plugins_documents_every_contract_as_the_api_states_it() -> None:
+    spec = importlib.util.spec_from_file_location("gen_contracts", ROOT / "docs" / "gen_contracts.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    text = (ROOT / "docs" / "writing-plugins.md").read_text(encoding="utf-8")
+    assert module.render() in text, "docs/writing-plugins.md is stale: run python docs/gen_contracts.py"
+    for kind in ("robot", "sensor", "strategy", "executor"):
+        assert f"### `{kind}`" in text
+
+
+@pytest.mark.timeout(300)
+def test_import_layers_hold() -> None:
+    """import-linter: the library never imports plugins or the CLI; each layer imports only those below."""
+    lint = Path(sys.executable).parent / "lint-imports"
+    out = subprocess.run([str(lint), "--no-cache"], cwd=ROOT, capture_output=True, text=True, timeout=280)
+    assert out.returncode == 0, out.stdout[-3000:]
+    assert "3 kept, 0 broken" in out.stdout
+
+
+def test_robots_declare_capabilities_and_the_library_reads_them(registry) -> None:
+    from explore.api import Capability
+
+    made = {name: registry.create("robot", name, {}) for name in registry.names("robot")}
+    assert made["free_flyer"].has(Capability.FREE_FLYER)
+    assert made["mobile_manipulator"].has(Capability.MOBILE_BASE) and made["mobile_manipulator"].has(Capability.ARM)
+    assert not made["arm"].has(Capability.MOBILE_BASE)
+    assert made["mobile_manipulator"].default_planner == "tuck_and_drive"
+    laser = registry.create("robot", "mobile_base", {"laser_height": 0.3})
+    assert laser.has(Capability.PLANAR_LASER) and not made["mobile_base"].has(Capability.PLANAR_LASER)
+
+
+def test_a_sensor_noise_model_is_its_own_measure(registry) -> None:
+    """The default measure adds sigma(d) noise; a sensor may override it (the example ToF camera does)."""
+    sensor = registry.create("sensor", "depth_camera", {"noise": "kinect"})
+    ranges = np.full(20000, 1.0)
+    noisy = sensor.measure(ranges.copy(), np.ones_like(ranges), np.random.default_rng(0))
+    assert np.std(noisy - ranges) == pytest.approx(1.425e-3, rel=0.03)  # Khoshelham sigma at 1 m
