@@ -43,7 +43,8 @@ def render() -> str:
         methods = _methods(cls)
         if methods:
             lines += ["| method | must implement | what |", "| --- | --- | --- |"]
-            lines += [f"| `{_cell(sig)}` | {'yes' if abstract else ''} | {_cell(doc)} |" for sig, doc, abstract in methods]
+            lines += [f"| `{_cell(sig)}` | {'yes' if abstract else ''} | {_cell(doc)} |"
+                      for sig, doc, abstract in methods]
             lines.append("")
     lines.append(END)
     return "\n".join(lines)
