@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -17,9 +17,6 @@ from explore.motion.noise import truncated_normal, truncated_normal_logpdf
 from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Robot
 from explore.sim import frame_pose, p
-
-if TYPE_CHECKING:
-    pass
 
 
 def _surface_samples(vertices: Array, triangles: np.ndarray, spacing: float) -> Points3:

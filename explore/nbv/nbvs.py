@@ -130,7 +130,7 @@ class NBVSSession(Reporting, Scoring, StateSampling):
             self.utility = self.visibility
         else:
             self.utility = registry.create("utility", utility, utility_params or {}, "<nbvs>")
-        planner = planner or self.robot.default_planner or registry.default("motion_planner")[0]
+        planner = planner or registry.planner_for(self.robot)
         declared = {p.name for p in registry.get("motion_planner", planner).params}
         defaults = {"time_limit": 3.0 if self.robot.has(Capability.MOBILE_BASE) else 1.0, "try_direct": True}
         params = {k: v for k, v in {**defaults, **(planner_params or {})}.items()

@@ -429,7 +429,7 @@ def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--plann
     if isinstance(planner, tuple):
         planner, params = planner
     if planner is None:
-        planner = robot.default_planner or registry.default("motion_planner")[0]
+        planner = registry.planner_for(robot)
     if isinstance(planner, str):
         return registry.create("motion_planner", planner, params or {}, source, "planner")
     return planner

@@ -58,7 +58,9 @@ class RecognizerBase(Recognizer):
     __call__ = recognize
 
     def recognize_model(self, cluster: Cluster, model: Model, scans: Mapping[int, Scan]) -> list[Hypothesis]:
-        raise NotImplementedError
+        """Hypotheses for ``cluster`` as ``model``: the per-model step of :meth:`recognize` (PPF, FPFH).
+        A recogniser that compares all models at once (VFH) overrides :meth:`recognize` instead."""
+        raise TypeError(f"{type(self).__name__}: implement recognize_model, or override recognize")
 
     def _finish(
         self, cluster: Cluster, model: Model, data: ModelCloud, poses: Sequence[tuple[Pose, dict[str, Any]]],

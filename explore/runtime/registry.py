@@ -154,6 +154,11 @@ class Registry:
             raise RegistryError("<plugins>", kind, f"no installed plugin package declares a default {what}") from None
         return name, dict(params)
 
+    def planner_for(self, robot: Any) -> str:
+        """The motion planner a robot (or robot class) moves with when a run names none: its own
+        ``default_planner``, else the declared default motion planner."""
+        return robot.default_planner or self.default("motion_planner")[0]
+
     def names(self, kind: str) -> list[str]:
         """Sorted names of the plugins of one kind."""
         return sorted(name for (k, name) in self.plugins if k == kind)

@@ -148,8 +148,7 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     spec = load_world_spec(config.world)
     robot = config.robot or spec.robot.plugin or registry.default("robot", "world")[0]
     where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
-    planner = (config.planner or registry.get("robot", robot, *where).factory.default_planner
-               or registry.default("motion_planner")[0])
+    planner = config.planner or registry.planner_for(registry.get("robot", robot, *where).factory)
     chosen = {
         "strategy": config.strategy,
         "motion_planner": planner,

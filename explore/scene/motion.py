@@ -117,7 +117,7 @@ class Mover:
         self.free_flyer = self.robot is None or self.robot.has(Capability.FREE_FLYER)
         self.planner = None
         if not self.free_flyer:
-            planner = planner or self.robot.default_planner or registry.default("motion_planner")[0]
+            planner = planner or registry.planner_for(self.robot)
             self.planner = registry.create("motion_planner", planner,
                                            {"time_limit": planning_time}, "<scene>")
         self.base_dofs: tuple[int, ...] = () if self.robot is None else tuple(self.robot.base_dofs)
