@@ -5,10 +5,15 @@ from __future__ import annotations
 import faulthandler
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
+
+if TYPE_CHECKING:
+    from explore.sim import Simulation, WorldSpec
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
@@ -52,11 +57,38 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(0)
 
 
-@pytest.fixture
-def bunny_sim(registry) -> Iterator:
+@pytest.fixture(scope="session")
+def open_world(registry) -> Callable[..., Simulation]:
+    """The tests' one way to open a simulated world (a shipped world's name, a YAML path or a
+    ``WorldSpec``) with the session's registry: ``with open_world("tabletop") as sim: ...``."""
     from explore.sim import Simulation
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    def factory(world: str | Path | WorldSpec, seed: int = 0) -> Simulation:
+        return Simulation(str(world) if isinstance(world, Path) else world, registry, seed=seed)
+
+    return factory
+
+
+def _shared_world(name: str, scope: str = "module"):  # noqa: ANN202
+    """A fixture ``name`` holding the shipped world ``name``, shared by the tests of a module."""
+
+    @pytest.fixture(scope=scope, name=name)
+    def fixture(open_world) -> Iterator[Simulation]:
+        with open_world(name) as sim:
+            yield sim
+
+    return fixture
+
+
+tabletop = _shared_world("tabletop")
+workcell = _shared_world("workcell")
+two_tables = _shared_world("two_tables")
+cluttered = _shared_world("cluttered")
+
+
+@pytest.fixture
+def bunny_sim(open_world) -> Iterator[Simulation]:
+    with open_world("bunny_pedestal") as sim:
         yield sim
 
 

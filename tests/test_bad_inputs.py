@@ -64,7 +64,7 @@ def catalogue_snapshot() -> dict[str, str]:
 
 
 @pytest.fixture
-def sandbox(tmp_path, monkeypatch, registry):
+def sandbox(tmp_path, monkeypatch):
     """The case's working directory with {file}, {db} and {mesh}; EXPLORE_DB points into it."""
     from explore.perception.database import ObjectDatabase
     from explore.sim.meshes import box_mesh

@@ -64,10 +64,9 @@ def test_missing_database_without_create(tmp_path):
     assert not (tmp_path / "none.db").exists()
 
 
-def test_seed_from_world(registry, tmp_path):
-    from explore.sim import Simulation
+def test_seed_from_world(open_world, tmp_path):
 
-    with Simulation("tabletop", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+    with open_world("tabletop") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         truth = db.seed_from_world(sim)
         assert sorted(truth) == db.names() == ["duck", "mug"]
         for name, pose in truth.items():

@@ -23,10 +23,9 @@ from explore.sim import ScanPath, TriMesh, sphere_mesh
 
 
 @pytest.fixture(scope="module")
-def bunny(registry):
-    from explore.sim import Simulation
+def bunny(open_world):
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         yield sim, GroundTruthMetrics(sim)
 
 

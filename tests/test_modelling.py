@@ -96,18 +96,17 @@ def test_named_strategies_are_registered(registry) -> None:  # noqa: ANN001
     assert util.variant == "kriegel_literal" and util.omega < 0 and term.coverage == 0.8
 
 
-def run_session(registry, strategy: str, scans: int, seed: int = 0):  # noqa: ANN001, ANN201
+def run_session(open_world, registry, strategy: str, scans: int, seed: int = 0):  # noqa: ANN001, ANN201
     from explore.nbv import ModellingSession
-    from explore.sim import Simulation
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         session = ModellingSession(sim, strategy, registry, seed=seed, max_scans=scans, continue_after_stop=True)
         return session, session.run()
 
 
 @pytest.mark.slow
-def test_modelling_run_rises_and_beats_random(registry) -> None:  # noqa: ANN001
-    session, result = run_session(registry, "ig_quality/bs_hr", 5)
+def test_modelling_run_rises_and_beats_random(open_world, registry) -> None:  # noqa: ANN001
+    session, result = run_session(open_world, registry, "ig_quality/bs_hr", 5)
     m = result.metrics
     curve = np.asarray(m["coverage"])
     assert len(curve) == 5 and m["scans"] == 5
@@ -120,19 +119,18 @@ def test_modelling_run_rises_and_beats_random(registry) -> None:  # noqa: ANN001
     assert 0.0 < m["rms_error_m"] < 0.0015 and 0.0 < m["chamfer_m"] < 0.004
     assert m["coverage_auc"] == pytest.approx(float(np.mean(curve)))  # 5 scans of a 5-scan budget
     assert m["fallback_scans"] == 0  # no fallback unless the session asks for one
-    _, baseline = run_session(registry, "random/random", 5)
+    _, baseline = run_session(open_world, registry, "random/random", 5)
     assert curve[-1] > baseline.metrics["coverage"][-1]
     # deterministic for a seed
-    _, again = run_session(registry, "ig_quality/bs_hr", 5)
+    _, again = run_session(open_world, registry, "ig_quality/bs_hr", 5)
     assert again.metrics["coverage"] == pytest.approx(list(curve))
 
 
 @pytest.mark.slow
-def test_step_by_step_api(registry) -> None:  # noqa: ANN001
+def test_step_by_step_api(open_world, registry) -> None:  # noqa: ANN001
     from explore.nbv import ModellingSession
-    from explore.sim import Simulation
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         session = ModellingSession(sim, "ig/bs", registry, seed=1, max_scans=3)
         scan, length, travel = session.acquire(session.initial_target())
         info = session.integrate(scan)

@@ -10,13 +10,7 @@ import pytest
 
 from explore.core import look_at
 from explore.motion import MotionProblem, classify_blocked, linear_scan_path_ik, validate_path
-from explore.sim import ScanPath, Simulation
-
-
-@pytest.fixture(scope="module")
-def workcell(registry):
-    with Simulation("workcell", registry) as sim:
-        yield sim
+from explore.sim import ScanPath
 
 
 @pytest.fixture(scope="module")
@@ -91,8 +85,8 @@ def test_linear_scan_path_in_10mm_portions(workcell) -> None:
         assert np.linalg.norm(robot.fk(q)[:3, 3] - pose[:3, 3]) < 1e-3
 
 
-def test_straight_line_for_the_free_flyer(registry) -> None:
-    with Simulation("bunny_pedestal", registry) as sim:
+def test_straight_line_for_the_free_flyer(open_world, registry) -> None:
+    with open_world("bunny_pedestal") as sim:
         robot = sim.robot
         problem = MotionProblem(robot)
         planner = registry.get("motion_planner", "straight_line").create({})
@@ -103,8 +97,8 @@ def test_straight_line_for_the_free_flyer(registry) -> None:
         assert planner.plan(problem, robot.ik(look_at([-0.3, 0.0, 0.3], [0, 0, 0.6])), through_pedestal) is None
 
 
-def test_kinodynamic_base_plan_gives_controls_that_reach_the_goal(registry) -> None:
-    with Simulation("two_tables", registry) as sim:
+def test_kinodynamic_base_plan_gives_controls_that_reach_the_goal(open_world, registry) -> None:
+    with open_world("two_tables") as sim:
         robot = sim.robot
         problem = MotionProblem(robot)
         start = robot.q.copy()
@@ -147,12 +141,12 @@ def _wrapped(a: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", ["kinodynamic", "tuck_and_drive"])
-def test_mobile_manipulator_drives_around_the_furniture(registry, name) -> None:
+def test_mobile_manipulator_drives_around_the_furniture(open_world, registry, name) -> None:
     """Cluttered: tuck the arm, drive past chair_1 to the far side, untuck; executed without noise
     the controls reach the goal (the gap closed by the steering) without touching the true world."""
     from explore.mapping import PVS
 
-    with Simulation("cluttered", registry) as sim:
+    with open_world("cluttered") as sim:
         robot = sim.robot
         pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.02)  # the bunny's box: unknown
         problem = MotionProblem(robot, space_free=pvs.is_free)
@@ -171,9 +165,9 @@ def test_mobile_manipulator_drives_around_the_furniture(registry, name) -> None:
         assert np.allclose(run.final[:2], goal[:2], atol=1e-6) and abs(_wrapped(run.final[2] - goal[2])) < 1e-6
 
 
-def test_geometric_planner_checks_the_turn_drive_turn_a_differential_base_drives(registry) -> None:
+def test_geometric_planner_checks_the_turn_drive_turn_a_differential_base_drives(open_world, registry) -> None:
     """Base-only problem (arm pinned): every returned segment is valid as the base executes it."""
-    with Simulation("cluttered", registry) as sim:
+    with open_world("cluttered") as sim:
         robot = sim.robot
         start = robot.q.copy()
         problem = MotionProblem(robot).pinned(robot.joint_dofs, start)
@@ -235,14 +229,14 @@ def test_a_work_budget_without_work_still_ends_by_the_wall_guard() -> None:
     assert WALL_FACTOR * 0.02 + 1.0 <= waited + 0.011 < WALL_FACTOR * 0.02 + 1.5
 
 
-def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(registry) -> None:
+def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(open_world) -> None:
     """Start and goal 1.2 m apart beside the table, a few cm from it: the straight drive along
     its edge is valid with the 1 cm clearance; with drive_clearance 0.2 m the base may start and
     stop there, but every pose 0.2 m or more from both ends keeps 0.2 m from the table."""
     from explore.motion import PlanarChecker, box_distance, plan_mobile
     from explore.sim import p
 
-    with Simulation("scene_small_mm", registry) as sim:
+    with open_world("scene_small_mm") as sim:
         robot = sim.robot
         table = next(b.body_id for b in sim.bodies if b.name == "table")
         lo, hi = (np.array(v) for v in p.getAABB(table, physicsClientId=sim.client))

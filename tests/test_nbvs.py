@@ -17,13 +17,6 @@ from explore.nbv import (
     rollout_batch,
     samples_needed,
 )
-from explore.sim import Simulation
-
-
-@pytest.fixture(scope="module")
-def cluttered(registry):
-    with Simulation("cluttered", registry) as sim:
-        yield sim
 
 
 def _ones(samples: StateSamples) -> np.ndarray:
@@ -101,8 +94,8 @@ def test_expected_utility_weights_by_probability(cluttered) -> None:
     assert again.value == eu.value  # deterministic for a seed
 
 
-def test_filter_pipeline_counts_are_monotone(registry) -> None:
-    with Simulation("cluttered", registry) as sim:
+def test_filter_pipeline_counts_are_monotone(open_world, registry) -> None:
+    with open_world("cluttered") as sim:
         session = NBVSSession(sim, registry, expected=True, k=10, n_samples=2000, seed=0, top=5)
         session.initial()
         sampled = session.sample()
@@ -124,8 +117,8 @@ def test_filter_pipeline_counts_are_monotone(registry) -> None:
             assert state.unk >= session.min_unknown
 
 
-def test_two_view_nbvs_run_increases_coverage(registry) -> None:
-    with Simulation("cluttered", registry) as sim:
+def test_two_view_nbvs_run_increases_coverage(open_world, registry) -> None:
+    with open_world("cluttered") as sim:
         # the paper's DU row (no noise): the views land where they were chosen
         session = NBVSSession(sim, registry, expected=False, n_samples=2000, seed=0, max_views=2, top=8,
                               noise=False)
@@ -184,12 +177,12 @@ def _free_flyer_context(sim, registry):
                            rng=np.random.default_rng(0), registry=registry)
 
 
-def test_expected_utility_plugin_wraps_any_utility(registry) -> None:
+def test_expected_utility_plugin_wraps_any_utility(open_world, registry) -> None:
     """Without noise EU equals the wrapped utility; with noise a path 5 mm from the pedestal scores 0."""
     from explore.core import look_at
     from explore.nbv import Candidate
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         robot = sim.robot
         ctx = _free_flyer_context(sim, registry)
         base = registry.create("utility", "unknown_count", {}, "<test>")

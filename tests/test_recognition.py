@@ -48,11 +48,10 @@ def _error_m_deg(estimate, truth) -> tuple[float, float]:
 
 
 @pytest.fixture(scope="module")
-def scene(registry, tmp_path_factory):
+def scene(open_world, registry, tmp_path_factory):
     """Tabletop overview scan, its clusters, and a database with all six objects (ground truth meshes)."""
-    from explore.sim import Simulation
 
-    with Simulation("tabletop", registry) as sim:
+    with open_world("tabletop") as sim:
         ov = sim.spec.overview
         scan = sim.sensor.acquire(sim, look_at(ov[:3], ov[3:]), np.random.default_rng(0))
         segmentation = registry.create("segmenter", "plane_clusters", {"scale": "table"}).segment(scan)
@@ -235,14 +234,13 @@ def test_stored_descriptors_are_reused(registry, scene):
     assert _error_m_deg(hypotheses[0].pose, truth["duck"])[0] < 0.005
 
 
-def test_duck_touching_a_block(registry, tmp_path):
+def test_duck_touching_a_block(open_world, tmp_path):
     """Bad input: an object touching another gives one cluster; PPF still finds the duck."""
     from explore.perception import PlaneClusterSegmenter, object_frame
-    from explore.sim import Simulation
 
     path = tmp_path / "touching.yaml"
     path.write_text(TOUCHING_WORLD)
-    with Simulation(str(path), registry) as sim:
+    with open_world(str(path)) as sim:
         scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
         duck = next(b for b in sim.objects() if b.name == "duck")
         truth, mesh = object_frame(duck)

@@ -46,14 +46,6 @@ def _residual(correction: np.ndarray, center: np.ndarray) -> tuple[float, float]
 
 
 @pytest.fixture(scope="module")
-def tabletop(registry):
-    from explore.sim import Simulation
-
-    with Simulation("tabletop", registry) as sim:
-        yield sim
-
-
-@pytest.fixture(scope="module")
 def bunny_scan_and_model(tabletop):
     """A Kinect-noise depth scan of the bunny (points, normals) and its model (points, normals)."""
     sim = tabletop
@@ -251,14 +243,13 @@ def test_rebase_scan_round_trip(tabletop):
     assert np.allclose(transform_points(invert(moved), rebase_scan(scan, moved).points()), local, atol=1e-9)
 
 
-def test_pose_graph_halves_the_error_of_a_noisy_mobile_base(registry):
+def test_pose_graph_halves_the_error_of_a_noisy_mobile_base(open_world):
     """12 views around table_b of two_tables; odometry 1.5 cm / 1.5 deg per step accumulates."""
-    from explore.sim import Simulation
 
     n, sigma_t, sigma_r = 12, 0.015, math.radians(1.5)
     rng = np.random.default_rng(0)
     center = np.array([1.3, -0.8, 0.75])
-    with Simulation("two_tables", registry) as sim:
+    with open_world("two_tables") as sim:
         truth, base = [], []
         for k in range(n):
             angle = 2.0 * math.pi * k / n

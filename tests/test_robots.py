@@ -9,24 +9,12 @@ import pytest
 
 from explore.core import look_at, pose_error
 from explore.motion import MotionPlan
-from explore.sim import Simulation, list_worlds
-
-
-@pytest.fixture(scope="module")
-def workcell(registry):
-    with Simulation("workcell", registry) as sim:
-        yield sim
-
-
-@pytest.fixture(scope="module")
-def two_tables(registry):
-    with Simulation("two_tables", registry) as sim:
-        yield sim
+from explore.sim import list_worlds
 
 
 @pytest.mark.parametrize("world", [w.stem for w in list_worlds()])
-def test_every_shipped_world_builds_with_a_valid_start(registry, world: str) -> None:
-    with Simulation(world, registry) as sim:
+def test_every_shipped_world_builds_with_a_valid_start(open_world, world: str) -> None:
+    with open_world(world) as sim:
         robot = sim.robot
         assert robot.dof >= 3
         if robot.name != "free_flyer":  # the free flyer has no start pose of its own
@@ -86,8 +74,8 @@ def test_mobile_base_ik_round_trip_and_reachability(two_tables) -> None:
     assert robot.ik(too_high, rng) is None
 
 
-def test_mobile_manipulator_ik_round_trip(registry) -> None:
-    with Simulation("cluttered", registry) as sim:
+def test_mobile_manipulator_ik_round_trip(open_world) -> None:
+    with open_world("cluttered") as sim:
         robot = sim.robot
         assert robot.dof >= 8
         rng = np.random.default_rng(4)
@@ -99,11 +87,11 @@ def test_mobile_manipulator_ik_round_trip(registry) -> None:
         assert not robot.in_collision(q)
 
 
-def test_mobile_manipulator_ik_keeps_its_base_when_the_arm_reaches(registry) -> None:
+def test_mobile_manipulator_ik_keeps_its_base_when_the_arm_reaches(open_world) -> None:
     """With ``keep_base`` (on in scene_small_mm) IK tries the current base first (a base that
     stays put keeps its odometry); a pose beyond the arm's reach moves the base; a plan that
     stays in place executes as a no-op."""
-    with Simulation("scene_small_mm", registry) as sim:
+    with open_world("scene_small_mm") as sim:
         robot = sim.robot
         here = robot.q.copy()
         rng = np.random.default_rng(6)
@@ -148,8 +136,8 @@ def test_noise_statistics_match_the_model(two_tables) -> None:
     assert np.allclose(configs[-1], goal, atol=1e-9) and not e.any()
 
 
-def test_execution_records_collisions_with_the_true_world_only(registry) -> None:
-    with Simulation("bunny_pedestal", registry) as sim:
+def test_execution_records_collisions_with_the_true_world_only(open_world) -> None:
+    with open_world("bunny_pedestal") as sim:
         robot = sim.robot
         a = robot.ik(look_at([-0.3, 0.0, 0.62], [0.0, 0.0, 0.6]))
         b = robot.ik(look_at([0.3, 0.0, 0.62], [0.6, 0.0, 0.6]))
@@ -212,9 +200,9 @@ def test_execute_samples_the_noise_model(two_tables) -> None:
     assert np.allclose(robot.execute(plan, noise=False, world="none").final, goal, atol=1e-9)
 
 
-def test_differential_base_turns_drives_turns_symmetrically(registry) -> None:
+def test_differential_base_turns_drives_turns_symmetrically(open_world) -> None:
     """The executed path of a -> b is that of b -> a reversed (OMPL's bidirectional planners need it)."""
-    with Simulation("cluttered", registry) as sim:
+    with open_world("cluttered") as sim:
         robot = sim.robot
         a = robot.q.copy()
         b = a.copy()

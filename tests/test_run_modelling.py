@@ -29,7 +29,7 @@ def _run(args: list[str], capsys) -> tuple[int, dict, list[str]]:
 
 
 @pytest.mark.slow
-def test_model_object_models_the_bunny_and_is_deterministic(tmp_path, capsys) -> None:
+def test_model_object_models_the_bunny_and_is_deterministic(open_world, tmp_path, capsys) -> None:
     """3 scans reach c_a >= 0.85 (seed 0: 0.46, 0.76, 0.86); the same seed gives the same metrics."""
     base = ["model_object", "--world", "bunny_pedestal", "--max-scans", "3", "--seed", "0"]
     code, first, err = _run([*base, "--out", str(tmp_path / "a")], capsys)
@@ -51,10 +51,9 @@ def test_model_object_models_the_bunny_and_is_deterministic(tmp_path, capsys) ->
     # the tree adapter adds nothing: ModellingSession.step() from Python records the same
     from explore.nbv import ModellingSession
     from explore.runtime import Registry
-    from explore.sim import Simulation
 
     registry = Registry.load()
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=0, max_scans=3, register_scans=True)
         library = session.run().metrics
     assert library["coverage"] == pytest.approx(curve, abs=1e-6)  # JSON keeps 6 decimals
@@ -151,12 +150,11 @@ def test_an_unknown_planning_clock_is_bad_input(tmp_path, capsys) -> None:
 
 
 @pytest.fixture(scope="module")
-def bunny_session(registry):
+def bunny_session(open_world, registry):
     """A free-flyer modelling session on the bunny after its initial scan."""
     from explore.nbv import ModellingSession
-    from explore.sim import Simulation
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=0, max_scans=6)
         session.step()
         yield session
@@ -192,12 +190,11 @@ def test_nbs_rule_discards_occupied_and_keeps_unknown(bunny_session) -> None:
 
 
 @pytest.fixture(scope="module")
-def fourth_scan(registry):
+def fourth_scan(open_world, registry):
     """A session after 3 scans and its 4th scan, not yet integrated."""
     from explore.nbv import ModellingSession
-    from explore.sim import Simulation
 
-    with Simulation("bunny_pedestal", registry) as sim:
+    with open_world("bunny_pedestal") as sim:
         session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=0, max_scans=6)
         for _ in range(3):
             session.step()

@@ -102,11 +102,10 @@ def test_scene_exploration_tree_explains_every_object(small_run):
 
 
 @pytest.mark.slow
-def test_second_run_recognises_the_modelled_object(registry, small_run, tmp_path):
-    from explore.sim import Simulation
+def test_second_run_recognises_the_modelled_object(open_world, registry, small_run, tmp_path):
 
     _, db = small_run
-    with Simulation(_world(tmp_path, REARRANGED), registry) as sim, ObjectDatabase.open(db) as database:
+    with open_world(_world(tmp_path, REARRANGED)) as sim, ObjectDatabase.open(db) as database:
         scene = SceneSession(sim, registry, database, seed=1, multi_view_views=5)
         scene.step()  # overview, segmentation, recognition, validation
         scene.recognition.resolve_ambiguous()  # a second view confirms each pose
@@ -120,12 +119,11 @@ def test_second_run_recognises_the_modelled_object(registry, small_run, tmp_path
     assert metrics["wrong_matches"]["accepted"] == 0 and not metrics["added_to_database"]
 
 
-def test_touching_objects_are_split_after_recognition(registry, tmp_path):
+def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_path):
     """Bad input: a block touching the duck forms one cluster; the duck is recognised and the points it
     does not explain become a second object (to be modelled)."""
-    from explore.sim import Simulation
 
-    with Simulation(_world(tmp_path, TOUCHING), registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+    with open_world(_world(tmp_path, TOUCHING)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         db.seed_from_world(sim)
         scene = SceneSession(sim, registry, db)
         scene.viewing.overview()
@@ -169,10 +167,9 @@ def test_corrupted_database_is_refused_and_untouched(tmp_path, capsys):
     assert garbage.read_bytes() == before
 
 
-def test_session_refuses_bad_plugins(registry, tmp_path):
-    from explore.sim import Simulation
+def test_session_refuses_bad_plugins(open_world, registry, tmp_path):
 
-    with Simulation("scene_small", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+    with open_world("scene_small") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         with pytest.raises(BadInput, match="recogn"):
             SceneSession(sim, registry, db, recognizer="no_such_recogniser")
 
@@ -193,7 +190,7 @@ def test_close_holes_caps_an_open_box():
     assert abs(volume) == pytest.approx(1e-3, rel=1e-6)  # consistently oriented: the enclosed volume
 
 
-def test_base_laser_sees_the_table_legs_and_localises_a_view(registry):
+def test_base_laser_sees_the_table_legs_and_localises_a_view(open_world, registry):
     """The mobile manipulator's planar base laser hits the known walls and table legs (its points, put back
     in the world at the true sensor pose, lie on the map). The overview camera view sees only the
     table top and its objects, nothing of the map, so it cannot be localised when its odometry is
@@ -204,9 +201,8 @@ def test_base_laser_sees_the_table_legs_and_localises_a_view(registry):
     from explore.core import look_at, pose_error, transform_points
     from explore.perception import IncrementalPoseGraph, rebase_scan, sigmas6
     from explore.scene import FLOOR, Mover, environment_reference
-    from explore.sim import Simulation
 
-    with Simulation("scene_small_mm", registry) as sim:
+    with open_world("scene_small_mm") as sim:
         robot = sim.robot
         robot.q = robot.ik(look_at([0.0, -0.75, 1.25], [0.0, 0.0, 0.65]), np.random.default_rng(0))
         robot.set_config(robot.q)
@@ -233,19 +229,18 @@ def test_base_laser_sees_the_table_legs_and_localises_a_view(registry):
 
 
 @pytest.mark.slow
-def test_a_drive_in_legs_ends_nearer_its_goal(registry):
+def test_a_drive_in_legs_ends_nearer_its_goal(open_world, registry):
     """A 4-5 m drive around the table with the noisy base, four seeds. Open loop the base ends
     13-25 cm from the planned goal, or bumps into the table (seed 3 stops 1.85 m short); with
     replan_distance 1 m (back onto the plan after every metre) 2-19 cm, without a collision."""
     from explore.core import look_at
     from explore.motion import work_clock
     from explore.scene import Mover
-    from explore.sim import Simulation
 
     errors: dict[float, list[float]] = {0.0: [], 1.0: []}
     collisions = dict.fromkeys(errors, 0)
     for replan, seed in [(r, s) for r in errors for s in range(4)]:
-        with Simulation("scene_small_mm", registry) as sim, work_clock():
+        with open_world("scene_small_mm") as sim, work_clock():
             sim.robot.replan_distance = replan
             mover = Mover(sim, registry, seed=seed)
             target, configs = mover.reach(look_at([0.0, 0.8, 1.1], [0.0, 0.1, 0.65]))
@@ -256,14 +251,13 @@ def test_a_drive_in_legs_ends_nearer_its_goal(registry):
     assert np.median(errors[1.0]) < 0.5 * np.median(errors[0.0]), errors
 
 
-def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(registry):
+def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(open_world, registry):
     """Noise can stop the base within its 1 cm planning clearance of the table, where every plan
     from there is refused. With no valid configuration on the last motion, the mover backs the
     base off along its heading (2-20 cm) until planning can start, without touching anything."""
     from explore.scene import Mover
-    from explore.sim import Simulation
 
-    with Simulation("scene_small_mm", registry) as sim:
+    with open_world("scene_small_mm") as sim:
         robot = sim.robot
         mover = Mover(sim, registry, noise=False)
         problem = mover._problem()
@@ -281,7 +275,7 @@ def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(registry):
 
 
 @pytest.mark.slow
-def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_path):
+def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(open_world, registry, tmp_path):
     """The mobile base's own noisy execution (Vasquez-Gomez sigmas) drifts; the incremental gtsam pose
     graph (Plane ICP between views, heading from the known table) halves the scan-pose error, and the
     PVS re-integrated at the corrected poses puts less of the objects' true surface into free space;
@@ -289,9 +283,8 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(registry, tmp_
     from explore.mapping import PVS, sample_surface
     from explore.perception import rebase_scan
     from explore.scene import known_tables, pose_graph_errors, surround
-    from explore.sim import Simulation
 
-    with Simulation("scene_small_mobile", registry) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+    with open_world("scene_small_mobile") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         scene = SceneSession(sim, registry, db, seed=0)
         scene.viewing.overview()
         surround(scene, known_tables(sim)["table"], 0.7, 1.5, 0.8)

@@ -15,14 +15,6 @@ MIN_HEIGHT = 0.01
 
 
 @pytest.fixture(scope="module")
-def tabletop(registry):
-    from explore.sim import Simulation
-
-    with Simulation("tabletop", registry) as sim:
-        yield sim
-
-
-@pytest.fixture(scope="module")
 def overview(tabletop):
     ov = tabletop.spec.overview
     return tabletop.sensor.acquire(tabletop, look_at(ov[:3], ov[3:]), np.random.default_rng(0))
@@ -160,20 +152,18 @@ sensor:
 """
 
 
-def make_touching_world(registry, folder):
+def make_touching_world(open_world, registry, folder):
     """A duck with a block pressed against its side; overview scan and segmentation."""
-    from explore.sim import Simulation
-
     path = folder / "touching.yaml"
     path.write_text(TOUCHING_WORLD)
-    sim = Simulation(str(path), registry)
+    sim = open_world(str(path))
     scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
     segmenter = registry.create("segmenter", "plane_clusters", {"scale": "table"})
     return sim, scan, segmenter.segment(scan)
 
 
 @pytest.fixture(scope="module")
-def touching_world(registry, tmp_path_factory):
-    sim, scan, segmentation = make_touching_world(registry, tmp_path_factory.mktemp("touching"))
+def touching_world(open_world, registry, tmp_path_factory):
+    sim, scan, segmentation = make_touching_world(open_world, registry, tmp_path_factory.mktemp("touching"))
     yield sim, scan, segmentation
     sim.close()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from explore.core import look_at
-from explore.sim import ScanPath, Simulation, WorldSpec, load_world_spec, sigma_kinect, sigma_laser_poly
+from explore.sim import ScanPath, WorldSpec, load_world_spec, sigma_kinect, sigma_laser_poly
 
 WALL = """
 name: wall
@@ -19,10 +19,10 @@ sensor: depth_camera
 
 
 @pytest.fixture
-def wall_sim(tmp_path, registry):
+def wall_sim(open_world, tmp_path):
     path = tmp_path / "wall.yaml"
     path.write_text(WALL)
-    with Simulation(load_world_spec(path), registry) as sim:
+    with open_world(load_world_spec(path)) as sim:
         yield sim
 
 
@@ -95,8 +95,8 @@ def test_striper_sweeps_one_stripe_per_frame(wall_sim, registry, rng) -> None:
     np.testing.assert_allclose(scan.points()[:, 2], 0.0, atol=1e-6)
 
 
-def test_colour_comes_from_the_renderer(registry, rng) -> None:
-    with Simulation("tabletop", registry) as sim:
+def test_colour_comes_from_the_renderer(open_world, registry, rng) -> None:
+    with open_world("tabletop") as sim:
         camera = _camera(registry, color=True, noise="none")
         scan = camera.acquire(sim, look_at([0.0, -0.9, 1.35], [0.0, 0.0, 0.65]), rng)
         assert scan.colors is not None and scan.colors.shape == (len(scan), 3)

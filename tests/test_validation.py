@@ -40,12 +40,11 @@ def test_bad_input():
 
 
 @pytest.fixture(scope="module")
-def scene(registry):
+def scene(open_world):
     """tabletop after the overview scan, integrated into a 10 mm PVS."""
     from explore.mapping import PVS
-    from explore.sim import Simulation
 
-    with Simulation("tabletop", registry) as sim:
+    with open_world("tabletop") as sim:
         pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
         eye = np.array([0.0, -0.9, 1.35])
         pvs.integrate(sim.sensor.acquire(sim, look_at(eye, [0.0, 0.0, 0.65]), np.random.default_rng(0)))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from explore.core import BadInput
-from explore.sim import Simulation, list_worlds, load_world_spec
+from explore.sim import list_worlds, load_world_spec
 
 SHIPPED = {"bunny_pedestal", "tabletop", "cluttered", "workcell", "two_tables"}
 
@@ -40,10 +40,10 @@ def test_bunny_rests_on_the_pedestal_at_the_requested_size(bunny_sim) -> None:
     assert len(bunny_sim.environment_ids()) == 1
 
 
-def test_urdf_bodies_match_pybullet(registry) -> None:
+def test_urdf_bodies_match_pybullet(open_world) -> None:
     from explore.sim import p
 
-    with Simulation("tabletop", registry) as sim:
+    with open_world("tabletop") as sim:
         for body in sim.objects():
             lo, hi = body.mesh.bounds
             aabb_lo, aabb_hi = (np.array(v) for v in p.getAABB(body.body_id, -1, physicsClientId=sim.client))
@@ -90,11 +90,11 @@ BAD = [
 
 
 @pytest.mark.parametrize(("text", "message"), BAD, ids=[m.split(":")[0] for _, m in BAD])
-def test_bad_world_is_one_clear_line(tmp_path, registry, text, message) -> None:
+def test_bad_world_is_one_clear_line(open_world, tmp_path, text, message) -> None:
     path = tmp_path / "bad.yaml"
     path.write_text(text)
     with pytest.raises(BadInput) as error:
-        Simulation(load_world_spec(path), registry).close()
+        open_world(load_world_spec(path)).close()
     line = error.value.line()
     assert line.startswith(str(path)) and message in line, line
     assert "\n" not in line

@@ -1,8 +1,8 @@
 """Simulated candidate beams through a voxel grid: the view-evaluation core of the utilities.
 
 One numba kernel walks every beam of every candidate through a dense snapshot of the PVS
-(Amanatides-Woo traversal) and accumulates, per candidate, every quantity the utility
-plugins need, so that one pass serves all of them:
+(with the PVS's own Amanatides-Woo traversal, ``explore.mapping.traversal``) and accumulates,
+per candidate, every quantity the utility plugins need, so that one pass serves all of them:
 
 ============  ==========================================================================
 index         quantity
@@ -46,6 +46,7 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from explore.core import Array, Points3
+from explore.mapping.traversal import next_axis, ray_start
 
 ENTROPY, UNKNOWN_VOXELS, QUAL_LIT, QUAL_NEED, TRAVERSED, OCC_FIRST, UNK_FIRST = range(7)
 OCCLUSION, UNOBSERVED, REAR_VOXEL, REAR_ENTROPY, PROXIMITY, HITS = range(7, 13)
@@ -142,91 +143,36 @@ class VoxelGrid:
         return VoxelGrid(pooled.astype(np.float32), self.origin.copy(), self.resolution * k)
 
 
-@njit(cache=True)
-def _box_interval(o0, o1, o2, d0, d1, d2, lo0, lo1, lo2, hi0, hi1, hi2):  # noqa: ANN001, ANN202
-    t0 = -1e30
-    t1 = 1e30
-    for o, d, lo, hi in ((o0, d0, lo0, hi0), (o1, d1, lo1, hi1), (o2, d2, lo2, hi2)):
-        if abs(d) < 1e-12:
-            if o < lo or o > hi:
-                return 1.0, 0.0
-        else:
-            a = (lo - o) / d
-            b = (hi - o) / d
-            if a > b:
-                a, b = b, a
-            if a > t0:
-                t0 = a
-            if b < t1:
-                t1 = b
-    return t0, t1
-
-
 @njit(cache=True, nogil=True)
 def _trace_range(
     prob, ent, has_feat, border, density, normal, prox, origin, res,
     origins, dirs, tstart, group, r0, r1, tmin, tmax,
     p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out, stamp_t, stamp_f,
 ):  # noqa: ANN001, ANN202
-    """Beams r0 .. r1-1 (whole candidates); ``stamp_*`` are this worker's visited marks."""
+    """Beams r0 .. r1-1 (whole candidates); ``stamp_*`` are this worker's visited marks.
+
+    The walk is the PVS's own traversal (``explore.mapping.traversal``) in grid coordinates.
+    """
     nx, ny, nz = prob.shape
-    hi0 = origin[0] + nx * res
-    hi1 = origin[1] + ny * res
-    hi2 = origin[2] + nz * res
+    inv_res = 1.0 / res
+    lat = np.zeros(3, np.int64)
     for r in range(r0, r1):
         g = group[r]
         tag = g + 1
-        o0, o1, o2 = origins[r, 0], origins[r, 1], origins[r, 2]
         d0, d1, d2 = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-        t0, t1 = _box_interval(o0, o1, o2, d0, d1, d2, origin[0], origin[1], origin[2], hi0, hi1, hi2)
-        if t0 < tstart[r]:
-            t0 = tstart[r]  # HRT: the coarse pass proved the beam free up to here
-        if t0 < 0.0:
-            t0 = 0.0
-        if t1 > tmax:
-            t1 = tmax
-        if t0 >= t1:
+        (ok, t0, t1, i, j, k, si, sj, sk, tx, ty, tz, dtx, dty, dtz) = ray_start(
+            origins[r, 0] - origin[0], origins[r, 1] - origin[1], origins[r, 2] - origin[2], d0, d1, d2,
+            max(tstart[r], 0.0), tmax, lat, inv_res, res, nx, ny, nz,
+        )
+        if not ok:
             continue
-        # start voxel
-        t = t0 + 1e-9
-        px = o0 + d0 * t
-        py = o1 + d1 * t
-        pz = o2 + d2 * t
-        i = min(max(int(np.floor((px - origin[0]) / res)), 0), nx - 1)
-        j = min(max(int(np.floor((py - origin[1]) / res)), 0), ny - 1)
-        k = min(max(int(np.floor((pz - origin[2]) / res)), 0), nz - 1)
-        si = 1 if d0 > 0 else -1
-        sj = 1 if d1 > 0 else -1
-        sk = 1 if d2 > 0 else -1
-        big = 1e30
-        if abs(d0) > 1e-12:
-            nbx = origin[0] + (i + (1 if si > 0 else 0)) * res
-            tx = (nbx - o0) / d0
-            dtx = res / abs(d0)
-        else:
-            tx = big
-            dtx = big
-        if abs(d1) > 1e-12:
-            nby = origin[1] + (j + (1 if sj > 0 else 0)) * res
-            ty = (nby - o1) / d1
-            dty = res / abs(d1)
-        else:
-            ty = big
-            dty = big
-        if abs(d2) > 1e-12:
-            nbz = origin[2] + (k + (1 if sk > 0 else 0)) * res
-            tz = (nbz - o2) / d2
-            dtz = res / abs(d2)
-        else:
-            tz = big
-            dtz = big
         pv = 1.0
         first_done = False
         while True:
-            t_exit = min(tx, ty, tz)
+            axis = next_axis(tx, ty, tz)
+            t_exit = tx if axis == 0 else (ty if axis == 1 else tz)
             p = float(prob[i, j, k])
-            counted = t_exit > tmin
-            if counted:
+            if t_exit > tmin:
                 h = float(ent[i, j, k])
                 fresh = (not visited) or stamp_t[i, j, k] != tag
                 if visited:
@@ -258,12 +204,9 @@ def _trace_range(
             if p >= p_stop:
                 out[g, HITS] += 1.0
                 # peek at the voxel behind the surface (rear side)
-                if tx <= ty and tx <= tz:
-                    i2, j2, k2 = i + si, j, k
-                elif ty <= tz:
-                    i2, j2, k2 = i, j + sj, k
-                else:
-                    i2, j2, k2 = i, j, k + sk
+                i2 = i + si if axis == 0 else i
+                j2 = j + sj if axis == 1 else j
+                k2 = k + sk if axis == 2 else k
                 if 0 <= i2 < nx and 0 <= j2 < ny and 0 <= k2 < nz:
                     q = float(prob[i2, j2, k2])
                     if q >= unk_lo and q < unk_hi and stamp_f[i2, j2, k2] != -tag:
@@ -274,10 +217,10 @@ def _trace_range(
             pv *= 1.0 - p
             if t_exit >= t1:
                 break
-            if tx <= ty and tx <= tz:
+            if axis == 0:
                 i += si
                 tx += dtx
-            elif ty <= tz:
+            elif axis == 1:
                 j += sj
                 ty += dty
             else:
@@ -304,55 +247,31 @@ def _trace_chunks(
 
 @njit(cache=True, nogil=True)
 def _first_blocked_kernel(prob, origin, res, origins, dirs, tmax, p_block, out):  # noqa: ANN001, ANN202
-    """Amanatides-Woo walk of each ray to the entry of its first voxel with p >= p_block."""
+    """The PVS traversal of each ray to the entry of its first voxel with p >= p_block."""
     nx, ny, nz = prob.shape
-    hi0 = origin[0] + nx * res
-    hi1 = origin[1] + ny * res
-    hi2 = origin[2] + nz * res
-    big = 1e30
+    inv_res = 1.0 / res
+    lat = np.zeros(3, np.int64)
     for r in range(origins.shape[0]):
         out[r] = np.inf
-        o0, o1, o2 = origins[r, 0], origins[r, 1], origins[r, 2]
-        d0, d1, d2 = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-        t0, t1 = _box_interval(o0, o1, o2, d0, d1, d2, origin[0], origin[1], origin[2], hi0, hi1, hi2)
-        if t0 < 0.0:
-            t0 = 0.0
-        if t1 > tmax[r]:
-            t1 = tmax[r]
-        if t0 >= t1:
-            continue
-        t = t0 + 1e-9
-        i = min(max(int(np.floor((o0 + d0 * t - origin[0]) / res)), 0), nx - 1)
-        j = min(max(int(np.floor((o1 + d1 * t - origin[1]) / res)), 0), ny - 1)
-        k = min(max(int(np.floor((o2 + d2 * t - origin[2]) / res)), 0), nz - 1)
-        si = 1 if d0 > 0 else -1
-        sj = 1 if d1 > 0 else -1
-        sk = 1 if d2 > 0 else -1
-        tx, dtx, ty, dty, tz, dtz = big, big, big, big, big, big
-        if abs(d0) > 1e-12:
-            tx = (origin[0] + (i + (1 if si > 0 else 0)) * res - o0) / d0
-            dtx = res / abs(d0)
-        if abs(d1) > 1e-12:
-            ty = (origin[1] + (j + (1 if sj > 0 else 0)) * res - o1) / d1
-            dty = res / abs(d1)
-        if abs(d2) > 1e-12:
-            tz = (origin[2] + (k + (1 if sk > 0 else 0)) * res - o2) / d2
-            dtz = res / abs(d2)
-        t_enter = t0
-        while t_enter < t1:
+        (ok, t_in, t1, i, j, k, si, sj, sk, tx, ty, tz, dtx, dty, dtz) = ray_start(
+            origins[r, 0] - origin[0], origins[r, 1] - origin[1], origins[r, 2] - origin[2],
+            dirs[r, 0], dirs[r, 1], dirs[r, 2], 0.0, tmax[r], lat, inv_res, res, nx, ny, nz,
+        )
+        while ok and t_in < t1:
             if prob[i, j, k] >= p_block:
-                out[r] = t_enter
+                out[r] = t_in
                 break
-            if tx <= ty and tx <= tz:
-                t_enter = tx
+            axis = next_axis(tx, ty, tz)
+            if axis == 0:
+                t_in = tx
                 i += si
                 tx += dtx
-            elif ty <= tz:
-                t_enter = ty
+            elif axis == 1:
+                t_in = ty
                 j += sj
                 ty += dty
             else:
-                t_enter = tz
+                t_in = tz
                 k += sk
                 tz += dtz
             if i < 0 or i >= nx or j < 0 or j >= ny or k < 0 or k >= nz:
