@@ -32,6 +32,17 @@ def _cell(text: str) -> str:
     return text.replace("'", "").replace("|", "\\|")
 
 
+def _contract(cls: type) -> list[str]:
+    """A contract's docstring and the table of its methods."""
+    lines = [inspect.getdoc(cls) or "", ""]
+    methods = _methods(cls)
+    if methods:
+        lines += ["| method | must implement | what |", "| --- | --- | --- |"]
+        lines += [f"| `{_cell(sig)}` | {'yes' if abstract else ''} | {_cell(doc)} |" for sig, doc, abstract in methods]
+        lines.append("")
+    return lines
+
+
 def render() -> str:
     from explore.api import CONTRACTS
 
@@ -39,13 +50,10 @@ def render() -> str:
     lines = [BEGIN, ""]
     for kind, cls in CONTRACTS.items():
         lines += [f"### `{kind}`: `explore.api.{aliases.get(kind, cls.__name__)}`", ""]
-        lines += [inspect.getdoc(cls) or "", ""]
-        methods = _methods(cls)
-        if methods:
-            lines += ["| method | must implement | what |", "| --- | --- | --- |"]
-            lines += [f"| `{_cell(sig)}` | {'yes' if abstract else ''} | {_cell(doc)} |"
-                      for sig, doc, abstract in methods]
-            lines.append("")
+        lines += _contract(cls)
+        # contracts by role (e.g. the registrars) are the kind's subclasses in the same module
+        for sub in (s for s in cls.__subclasses__() if s.__module__ == cls.__module__ and getattr(s, "role", "")):
+            lines += [f"#### `explore.api.{sub.__name__}` (role `{sub.role}`)", ""] + _contract(sub)
     lines.append(END)
     return "\n".join(lines)
 

@@ -19,7 +19,7 @@ strategy           :class:`StrategyPlugin` a generator + utility + termination r
 segmenter          :class:`Segmenter`     ``segment(scans) -> Segmentation``
 recognizer         :class:`Recognizer`    ``recognize(cluster, models) -> hypotheses``
 pose_validator     :class:`PoseValidator` ``validate(pvs, vertices, pose) -> Validation``
-registrar          :class:`Registrar`     ``register(...)`` by ``role``
+registrar          :class:`Registrar`     ``register(...)``, fixed by the role's subclass
 behaviour          :class:`Behaviour`     a py_trees behaviour: ``work() -> Outcome``
 executor           :class:`Executor`      ``run(specs, on_done)``
 =================  =====================  ==================================================
@@ -90,7 +90,15 @@ from explore.nbv.termination import Termination
 from explore.nbv.utility import RAY_PARAMS, RayUtility, Utility, beams_of, candidate_beams, non_free_count
 from explore.nbv.view_generator import ViewGenerator
 from explore.perception import Cluster, Hypothesis, Model, Segmentation, Validation
-from explore.perception.contracts import PoseValidator, Recognizer, Registrar, Segmenter
+from explore.perception.contracts import (
+    PlaneRegistrar,
+    PoseValidator,
+    Recognizer,
+    Registrar,
+    ScansRegistrar,
+    ScanToModelRegistrar,
+    Segmenter,
+)
 from explore.runtime import KINDS, ExploreBehaviour, Outcome, failure, hookimpl, success
 from explore.runtime.compare_grid import OnDone, RunSpec
 from explore.runtime.executor import Executor
@@ -177,7 +185,10 @@ __all__ = [
     "PoseValidator",
     "RayUtility",
     "Recognizer",
+    "PlaneRegistrar",
     "Registrar",
+    "ScanToModelRegistrar",
+    "ScansRegistrar",
     "Robot",
     "RunSpec",
     "Scan",

@@ -6,7 +6,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from explore.api import Registrar
+from explore.api import PlaneRegistrar, ScansRegistrar, ScanToModelRegistrar
 from explore.core import Param, Points3, Pose
 from explore.perception import (
     IcpResult,
@@ -20,7 +20,7 @@ from explore.perception import (
 from explore.sim import Scan
 
 
-class Icp(Registrar):
+class Icp(ScanToModelRegistrar):
     """Local ICP of a scan to the model: 3 mm radius, 3 iterations, 60 deg normal gate (Kriegel 3.2.3)."""
 
     name = "icp"
@@ -42,11 +42,10 @@ class Icp(Registrar):
         )
 
 
-class PlaneIcp(Registrar):
+class PlaneIcp(PlaneRegistrar):
     """Goerner's Plane ICP: snap to the table plane, then 2-D (x, y, yaw) ICP with 3-D correspondences."""
 
     name = "plane_icp"
-    role = "plane"
     params = (
         Param("radius", float, 0.05, "m", "maximum correspondence distance (Goerner: 5 cm)", low=1e-6),
         Param("fine_radius", float, 0.01, "m", "second, fine stage (0 = single stage)", low=0.0),
@@ -61,11 +60,10 @@ class PlaneIcp(Registrar):
         return plane_icp(source, target, plane, source_plane, init, radius=radii, iterations=self.iterations)
 
 
-class PoseGraphRegistrar(Registrar):
+class PoseGraphRegistrar(ScansRegistrar):
     """gtsam pose graph over a run's scans: odometry + pairwise ICP + loop closures, robust LM."""
 
     name = "pose_graph"
-    role = "scans"
     params = (
         Param("voxel", float, 0.01, "m", "finest ICP voxel (coarse-to-fine x4, x2, x1)", low=1e-4),
         Param("priors", str, "odometry", "", "relative odometry factors (mobile base) or absolute kinematic priors",

@@ -32,6 +32,26 @@ def test_a_plugin_that_leaves_out_part_of_its_contract_cannot_be_built() -> None
         Incomplete()
 
 
+def test_a_registrar_states_its_role_and_a_step_refuses_another_role(open_world, registry, tmp_path) -> None:
+    """A registrar's role fixes its ``register`` signature; a scene session given the scan-to-model
+    ICP where it needs a pose graph says so in one line instead of calling it with scans."""
+    from explore.api import BadInput, ScansRegistrar
+    from explore.perception import ObjectDatabase
+    from explore.scene import SceneSession
+
+    class HalfAGraph(ScansRegistrar):
+        name = "half"
+
+        def register(self, scans, poses=None):  # noqa: ANN001, ANN202
+            return None
+
+    with pytest.raises(TypeError, match="incremental"):
+        HalfAGraph()
+    with open_world("scene_small") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+        with pytest.raises(BadInput, match="'icp' has role 'scan_to_model'; this step needs .* role 'scans'"):
+            SceneSession(sim, registry, db, registrar="icp")
+
+
 def test_writing_plugins_documents_every_contract_as_the_api_states_it() -> None:
     spec = importlib.util.spec_from_file_location("gen_contracts", ROOT / "docs" / "gen_contracts.py")
     module = importlib.util.module_from_spec(spec)

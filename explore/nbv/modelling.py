@@ -264,7 +264,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
                  max_angle_deg: float = 3.0) -> tuple[Scan, Any]:
         """Local ICP of a new scan to the model before integration (Kriegel thesis Sec. 3.2.3).
 
-        ``registrar`` is a registrar plugin with ``register(src, src_n, tgt, tgt_n)`` (default
+        ``registrar`` is a :class:`~explore.perception.ScanToModelRegistrar` (default
         ``icp``: 3 mm radius, 3 iterations, 60 deg normal gate) matching the scan's points to
         the model mesh. The correction is applied to every beam
         (:func:`explore.perception.rebase_scan`) unless the match is weak (fitness below
@@ -272,13 +272,13 @@ class ModellingSession(Evaluation, CandidatePlanning):
         ``max_shift``, or it turns more than ``max_angle_deg``); returns the (corrected) scan
         and the ICP result (None before there is a model).
         """
-        from explore.perception import rebase_scan, scan_points_and_normals
+        from explore.perception import rebase_scan, require_role, scan_points_and_normals
 
         model = self.surface.mesh
         if len(model.vertices) < 50 or not scan.hits.any():
             return scan, None
-        registrar = registrar or self.registry.create("registrar", *self.registry.default("registrar", "scan_to_model"),
-                                                      "<session>")
+        registrar = require_role(registrar or self.registry.create(
+            "registrar", *self.registry.default("registrar", "scan_to_model"), "<session>"), "scan_to_model")
         points, normals = scan_points_and_normals(scan)
         result = registrar.register(points, normals, model.vertices, self.surface.vertex_normals)
         transform = result.transformation

@@ -3,7 +3,16 @@ object database.
 """
 
 # The names other packages use (they import from the package, never from its modules).
-from explore.perception.contracts import PoseValidator, Recognizer, Registrar, Segmenter
+from explore.perception.contracts import (
+    PlaneRegistrar,
+    PoseValidator,
+    Recognizer,
+    Registrar,
+    ScansRegistrar,
+    ScanToModelRegistrar,
+    Segmenter,
+    require_role,
+)
 from explore.perception.database import ObjectDatabase, default_path, object_frame
 from explore.perception.fpfh import FPFHRansacRecognizer
 from explore.perception.fusion import FusedPose, fuse_poses
@@ -50,7 +59,11 @@ __all__ = [
     "PoseValidator",
     "Q_H_MIN",
     "Recognizer",
+    "PlaneRegistrar",
     "Registrar",
+    "ScanToModelRegistrar",
+    "ScansRegistrar",
+    "require_role",
     "Segmentation",
     "Segmenter",
     "Table",

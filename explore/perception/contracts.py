@@ -4,14 +4,17 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
-from explore.core import Points3, Pose
+from explore.core import BadInput, Points3, Pose
 from explore.core.plugin import Plugin
 
 if TYPE_CHECKING:
     from explore.perception.database import Model
     from explore.perception.hypotheses import Hypothesis
+    from explore.perception.icp import IcpResult
+    from explore.perception.incremental_graph import IncrementalPoseGraph
+    from explore.perception.pose_graph import PoseGraphResult
     from explore.perception.segmentation import Cloud, Cluster, Segmentation, Table
     from explore.perception.validation import Validation
     from explore.sim import Scan
@@ -75,20 +78,68 @@ class PoseValidator(Plugin, ABC):
 
 
 class Registrar(Plugin):
-    """Contract of kind ``registrar``: corrected poses of scans.
+    """Contract of kind ``registrar``: corrected poses. A registrar subclasses the contract of its
+    ``role``, which fixes what :meth:`register` takes and returns, and a session asks the registry
+    for a registrar of the role it needs (:func:`require_role` refuses one of another role):
 
-    A registrar has one ``register`` method whose arguments follow its ``role``:
-    ``"scan_to_model"`` (source points and normals, target points and normals, initial pose ->
-    an :class:`~explore.perception.icp.IcpResult`, the thesis' local ICP), ``"plane"`` (source,
-    target, the support plane in the target frame -> IcpResult, Görner's Plane ICP) or
-    ``"scans"`` (a run's scans and believed world_T_sensor poses -> a
-    :class:`~explore.perception.pose_graph.PoseGraphResult`). A session asks for a registrar of
-    the role it needs.
+    - :class:`ScanToModelRegistrar` (``"scan_to_model"``): a scan's points to the model (thesis' local ICP);
+    - :class:`PlaneRegistrar` (``"plane"``): a view to another over a shared support plane (Görner's Plane ICP);
+    - :class:`ScansRegistrar` (``"scans"``): a run's scans and believed poses to corrected poses (pose graph).
     """
 
     kind = "registrar"
-    role: str = "scan_to_model"
+    role: ClassVar[str] = ""
 
     def __init__(self, **values: Any) -> None:
         for param in self.params:
             setattr(self, param.name, values.get(param.name, param.default))
+
+
+class ScanToModelRegistrar(Registrar, ABC):
+    """Registrar of role ``scan_to_model``: aligns a new scan with the model built so far."""
+
+    role = "scan_to_model"
+
+    @abstractmethod
+    def register(self, source_points: Points3, source_normals: Points3 | None, target_points: Points3,
+                 target_normals: Points3 | None, init: Pose | None = None) -> IcpResult:
+        """The transform of the source into the target frame: source (n, 3) and target (m, 3) points
+        in metres, unit normals or None, ``init`` a 4x4 first guess; the result holds the 4x4
+        transform, its fitness (share of source points with a correspondence) and RMSE."""
+
+
+class PlaneRegistrar(Registrar, ABC):
+    """Registrar of role ``plane``: aligns two views of objects standing on the same plane."""
+
+    role = "plane"
+
+    @abstractmethod
+    def register(self, source: Points3, target: Points3, plane: Any, source_plane: Any | None = None,
+                 init: Pose | None = None) -> IcpResult:
+        """Transform of ``source`` (n, 3) into the frame of ``target`` (m, 3); ``plane`` is the support
+        plane (a, b, c, d with unit normal) in the target frame, ``source_plane`` in the source's."""
+
+
+class ScansRegistrar(Registrar, ABC):
+    """Registrar of role ``scans``: a run's views, each at its believed pose, to corrected poses."""
+
+    role = "scans"
+
+    @abstractmethod
+    def register(self, scans: Sequence[Scan], poses: Sequence[Pose] | None = None) -> PoseGraphResult:
+        """Corrected world_T_sensor (4x4) of every scan; ``poses`` are the believed ones (default:
+        each scan's own), the result also holds the marginal covariances and the edges used."""
+
+    @abstractmethod
+    def incremental(self, plane: Any | None = None, reference: Points3 | None = None) -> IncrementalPoseGraph:
+        """An empty graph with these parameters that grows one scan at a time; ``plane`` (the floor of
+        a mobile base) restricts its edges to x, y, yaw, ``reference`` (points of the known
+        environment, world frame) localises every scan in that map as well."""
+
+
+def require_role(registrar: Registrar, role: str, where: str = "<run>") -> Registrar:
+    """``registrar`` if it has ``role``; otherwise one line saying which role the step needs."""
+    if getattr(registrar, "role", None) != role:
+        raise BadInput(where, "registrar", f"{getattr(registrar, 'name', registrar)!r} has role "
+                       f"{getattr(registrar, 'role', None)!r}; this step needs a registrar of role {role!r}")
+    return registrar

@@ -41,11 +41,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Points3
-from explore.perception import (
-    Cluster,
-    Model,
-    Table,
-)
+from explore.perception import Cluster, Model, Table, require_role
 from explore.scene.database_update import DatabaseUpdate
 from explore.scene.motion import Mover
 from explore.scene.object_modelling import ObjectModelling
@@ -89,7 +85,7 @@ class SceneSession:
         self.segmenter = _plugin(registry, "segmenter", settings.segmenter)
         self.recognizer = _plugin(registry, "recognizer", settings.recognizer)
         self.validator = _plugin(registry, "pose_validator", settings.validator)
-        self.registrar = _plugin(registry, "registrar", settings.registrar, "scans")
+        self.registrar = require_role(_plugin(registry, "registrar", settings.registrar, "scans"), "scans", "<scene>")
         self.progress = progress
         lo = np.asarray(sim.spec.region_min, dtype=float)
         hi = np.asarray(sim.spec.region_max, dtype=float)
