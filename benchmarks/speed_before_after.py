@@ -32,7 +32,8 @@ SPEED_ROW = re.compile(r"^\s*(\d+)\s+(\d+)\s+([\d.]+)\s+([\d.]+)\s+[\d.]+x\s+\w+
 def checkout_of(python: str) -> Path:
     """The source checkout the interpreter imports ``explore`` from."""
     code = "import explore, pathlib; print(pathlib.Path(explore.__file__).resolve().parents[1])"
-    return Path(subprocess.run([python, "-c", code], capture_output=True, text=True, check=True).stdout.strip())
+    found = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True, cwd="/")  # not this folder
+    return Path(found.stdout.strip())
 
 
 def measure(python: str) -> dict[str, float]:
