@@ -6,16 +6,19 @@ An object modelled in the first run counts as re-recognised when the second run 
 as its own model (``result: recognised``, ``correct_model: true``).
 
     python benchmarks/rerecognition.py [--seeds 0-9] [--worlds tabletop_rearranged,tabletop_rearranged2]
-                                       [--jobs 2] [--json]
+                                       [--jobs 2] [--json] [--plot docs/images/qh_margins.png]
 
 Prints a table per re-arranged world (seed, objects modelled, re-recognised, and why not) and the
-totals; ``--json`` prints one JSON object instead.
+totals; ``--json`` prints one JSON object instead. Every run also gives, for each recognised
+object, the accepted q_h (Kriegel Eq. 3.10) and the best q_h among the hypotheses it rejected
+(by q_h or by the PVS votes): how close the call was. ``--plot`` draws their distributions.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import subprocess
 import sys
@@ -41,11 +44,58 @@ def _run(world: str, seed: int, db: Path, out: Path) -> dict:
     return json.loads(path.read_text()) if path.exists() else {"status": "crashed", "objects": []}
 
 
+def q_h_calls(metrics: dict, world: str, seed: int) -> list[dict]:
+    """Accepted q_h and the best rejected q_h of every recognised object of one run."""
+    calls = []
+    for o in metrics.get("objects", []):
+        if o.get("result") != "recognised" or o.get("q_h") is None:
+            continue
+        rejected = [r["q_h"] for r in o.get("rejected", []) if r.get("q_h") is not None and math.isfinite(r["q_h"])]
+        thresholds = [r["q_h"] - r["margin"] for r in o.get("rejected", []) if r.get("by") == "q_h"]
+        calls.append({"world": world, "seed": seed, "object": o["name"], "accepted": o["q_h"],
+                      "best_rejected": max(rejected) if rejected else None,
+                      "threshold": thresholds[0] if thresholds else None})
+    return calls
+
+
+def plot_margins(calls: list[dict], path: Path) -> None:
+    """Histograms of the accepted q_h and of the best rejected q_h, with the threshold."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    accepted = [c["accepted"] for c in calls]
+    rejected = [c["best_rejected"] for c in calls if c["best_rejected"] is not None]
+    gaps = sorted(c["accepted"] - c["best_rejected"] for c in calls if c["best_rejected"] is not None)
+    thresholds = {round(c["threshold"], 6) for c in calls if c["threshold"] is not None}
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    bins = [i / 40 for i in range(41)]
+    left.hist(accepted, bins=bins, alpha=0.7, color="tab:green", label=f"accepted ({len(accepted)})")
+    left.hist(rejected, bins=bins, alpha=0.7, color="tab:red", label=f"best rejected ({len(rejected)})")
+    for t in thresholds:
+        left.axvline(t, color="k", linestyle="--", label=f"threshold q_h = {t:g}")
+    left.set_xlabel("q_h (render-and-compare quality, Kriegel Eq. 3.10)")
+    left.set_ylabel("recognised objects")
+    left.legend()
+    right.plot(range(1, len(gaps) + 1), gaps, "o", color="tab:blue")
+    right.axhline(0.0, color="k", linewidth=0.8)
+    right.set_xlabel("recognised objects with a rejected rival, sorted")
+    right.set_ylabel("accepted q_h - best rejected q_h")
+    right.set_title(f"smallest margin {min(gaps):.3f}" if gaps else "no rejected rival")
+    fig.suptitle("How close the recognition calls were (every run of the re-recognition benchmark)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def one_seed(first: str, second: list[str], seed: int, tmp: Path) -> list[dict]:
     """The first exploration once, then each re-arranged world with its own copy of the database."""
     db = tmp / "first" / "objects.db"
     db.parent.mkdir(parents=True)
     a = _run(first, seed, db, tmp / "first" / "run")
+    first_calls = q_h_calls(a, first, seed)
     modelled = {o["name"]: o.get("model") for o in a.get("objects", []) if o.get("result") == "modelled"}
     rows = []
     for world in second:
@@ -53,7 +103,9 @@ def one_seed(first: str, second: list[str], seed: int, tmp: Path) -> list[dict]:
         copy.parent.mkdir(parents=True)
         if not db.exists():  # the first run ended before it stored anything
             rows.append({"world": world, "seed": seed, "first_status": a.get("status"), "second_status": None,
-                         "modelled": [], "rerecognised": [], "missed": {"(first run)": a.get("reason", "no metrics")}})
+                         "modelled": [], "rerecognised": [], "missed": {"(first run)": a.get("reason", "no metrics")},
+                         "q_h_calls": first_calls})
+            first_calls = []  # the first run's calls are counted once
             continue
         shutil.copy(db, copy)
         if db.with_suffix(".meshes").is_dir():
@@ -68,7 +120,8 @@ def one_seed(first: str, second: list[str], seed: int, tmp: Path) -> list[dict]:
                 missed[name] = f"{row.get('result', 'absent')}{seen_as}"
         rows.append({"world": world, "seed": seed, "first_status": a.get("status"), "second_status": b.get("status"),
                      "modelled": sorted(modelled), "rerecognised": sorted(set(modelled) - set(missed)),
-                     "missed": missed})
+                     "missed": missed, "q_h_calls": first_calls + q_h_calls(b, world, seed)})
+        first_calls = []  # the first run's calls are counted once
     return rows
 
 
@@ -79,12 +132,16 @@ def main() -> int:
     parser.add_argument("--seeds", default="0-9")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--plot", type=Path, default=None, help="PNG of the accepted and best rejected q_h")
     args = parser.parse_args()
     worlds = [w for w in args.worlds.split(",") if w]
     with tempfile.TemporaryDirectory(prefix="rerecognition-") as tmp, ThreadPoolExecutor(args.jobs) as pool:
         futures = [pool.submit(one_seed, args.first, worlds, seed, Path(tmp) / str(seed))
                    for seed in _seeds(args.seeds)]
         rows = [row for future in futures for row in future.result()]
+    calls = [c for r in rows for c in r["q_h_calls"]]
+    if args.plot:
+        plot_margins(calls, args.plot)
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
@@ -101,6 +158,12 @@ def main() -> int:
         good = sum(len(r["rerecognised"]) for r in mine)
         complete = sum(1 for r in mine if not r["missed"])
         print(f"\nre-recognised {good} of {total} modelled objects; every one in {complete} of {len(mine)} seeds")
+    rivals = [c for c in calls if c["best_rejected"] is not None]
+    if calls:
+        print(f"\nq_h calls: {len(calls)} recognised objects, accepted q_h {min(c['accepted'] for c in calls):.3f}"
+              f"-{max(c['accepted'] for c in calls):.3f}; {len(rivals)} with a rejected rival, best rejected q_h "
+              + (f"up to {max(c['best_rejected'] for c in rivals):.3f}, smallest margin "
+                 f"{min(c['accepted'] - c['best_rejected'] for c in rivals):.3f}" if rivals else "-"))
     return 0
 
 
