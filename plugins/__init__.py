@@ -16,8 +16,10 @@ from explore.runtime import hookimpl
 BUILTIN_MODULES = (
     "sensors",
     "robots",
+    "mobile_robots",
     "planners",
     "view_generators",
+    "boundary_hole",
     "utilities",
     "nbvs_plugins",
     "terminations",

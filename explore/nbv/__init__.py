@@ -17,12 +17,15 @@ from explore.nbv.candidates import (
     above_support,
     any_sweep,
     clip_above,
+    footprint_width,
     frame_from,
+    in_environment_boxes,
     make_target,
     path_over,
     repair,
     rotation,
     segments_hit_boxes,
+    standoff_for,
 )
 from explore.nbv.expected_utility import ObstacleField, StateSamples, expected_utility, rollout_batch, samples_needed
 from explore.nbv.modelling import ModellingSession
@@ -35,6 +38,9 @@ from explore.nbv.view_generator import ViewGenerator
 from explore.nbv.view_states import STAGES, ViewRecord
 
 __all__ = [
+    "standoff_for",
+    "in_environment_boxes",
+    "footprint_width",
     "AreaFactor",
     "BETAS_DEG",
     "CONTINUE",

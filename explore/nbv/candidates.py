@@ -193,6 +193,26 @@ class PlanningContext:
         return float(self.region_min[2]) - self.support_margin
 
 
+def standoff_for(ctx: PlanningContext, value: float) -> float:
+    """``value`` (m), or the sensor's optimal distance when ``value`` <= 0."""
+    return value if value > 0 else float(ctx.sensor.optimal_distance)
+
+
+def footprint_width(ctx: PlanningContext, standoff: float) -> float:
+    """Width (m) that one stripe (line sensor) or the image (area sensor) covers at ``standoff``."""
+    dirs = ctx.sensor.local_directions()
+    half = float(np.max(np.abs(dirs[:, 0] / np.maximum(dirs[:, 2], 1e-6))))
+    return 2.0 * standoff * half
+
+
+def in_environment_boxes(ctx: PlanningContext, positions: Points3, clearance: float = 0.02) -> np.ndarray:
+    """(n,) bool: which ``positions`` lie within ``clearance`` of a box of the known environment."""
+    blocked = np.zeros(len(positions), dtype=bool)
+    for lo, hi in ctx.environment_boxes:
+        blocked |= np.all((positions > np.asarray(lo) - clearance) & (positions < np.asarray(hi) + clearance), axis=1)
+    return blocked
+
+
 # ---------------------------------------------------------------------------------------
 # frames and paths
 # ---------------------------------------------------------------------------------------
