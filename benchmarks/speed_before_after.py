@@ -8,7 +8,9 @@ Each round runs, for the earlier and for this checkout in turn (A B, then B A, .
 checkout's own ``benchmarks/pvs_vs_octomap.py --json`` and ``benchmarks/reproduce_kriegel.py
 --speed``. The best of the rounds is kept per quantity (throughputs; selection times as
 selections per second), and the table gives after / before with the verdict against a 10 %
-tolerance. OctoMap's own throughput is measured in both and shows how much the machine drifted.
+tolerance. A selection time is printed to the millisecond, so there the verdict allows one
+printed digit on either side (5 vs 6 ms is "the same"). OctoMap's own throughput is measured in
+both and shows how much the machine drifted.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import sys
 from pathlib import Path
 
 TOLERANCE = 0.10
+PRINTED_S = 1e-3  # resolution of the selection times reproduce_kriegel.py --speed prints
 PVS_KEYS = (
     "octomap_points_per_s", "pvs_octomap_mode_points_per_s", "pvs_sensor_model_points_per_s",
     "pvs_roi_sensor_model_points_per_s", "ig_visited_visits_per_s", "ig_plain_visits_per_s",
@@ -57,6 +60,14 @@ def measure(python: str) -> dict[str, float]:
     return out
 
 
+def within(row: dict) -> bool:
+    """After is at most TOLERANCE slower than before (selection times: give or take a printed digit)."""
+    if row["quantity"].endswith("selections_per_s"):
+        before_s, after_s = 1.0 / row["before"], 1.0 / row["after"]
+        return after_s <= before_s * (1.0 + TOLERANCE) + 2 * PRINTED_S
+    return row["ratio"] >= 1.0 - TOLERANCE
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", required=True, help="Python of the earlier checkout's virtual environment")
@@ -78,15 +89,16 @@ def main(argv: list[str] | None = None) -> int:
     ]
     for row in rows:
         row["reference"] = row["quantity"].endswith(": octomap_points_per_s")  # OctoMap itself: the machine's drift
-    ok = all(r["ratio"] >= 1.0 - TOLERANCE for r in rows if not r["reference"])
+        row["within"] = row["reference"] or within(row)
+    ok = all(r["within"] for r in rows)
     if args.json:
         print(json.dumps({"rows": rows, "tolerance": TOLERANCE, "within_tolerance": ok}))
     else:
         width = max(len(r["quantity"]) for r in rows)
         print(f"{'quantity':<{width}} {'before':>10} {'after':>10} {'after/before':>12}")
         for r in rows:
-            print(f"{r['quantity']:<{width}} {r['before']:>10.4g} {r['after']:>10.4g} {r['ratio']:>11.3f}"
-                  f"{'  (reference: OctoMap)' if r['reference'] else ''}")
+            note = "  (reference: OctoMap)" if r["reference"] else ("" if r["within"] else "  SLOWER")
+            print(f"{r['quantity']:<{width}} {r['before']:>10.4g} {r['after']:>10.4g} {r['ratio']:>11.3f}{note}")
         print(f"every quantity within {TOLERANCE:.0%} of before (or faster): {'yes' if ok else 'no'}")
     return 0 if ok else 1
 
