@@ -162,7 +162,7 @@ def _trace_range(
         d0, d1, d2 = dirs[r, 0], dirs[r, 1], dirs[r, 2]
         (ok, t0, t1, i, j, k, si, sj, sk, tx, ty, tz, dtx, dty, dtz) = ray_start(
             origins[r, 0] - origin[0], origins[r, 1] - origin[1], origins[r, 2] - origin[2], d0, d1, d2,
-            max(tstart[r], 0.0), tmax, lat, inv_res, res, nx, ny, nz,
+            max(tstart[r], 0.0), tmax, lat, inv_res, res, nx, ny, nz,  # HRT: free up to tstart
         )
         if not ok:
             continue
