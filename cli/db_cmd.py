@@ -7,9 +7,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.table import Table
 
 from explore.core import BadInput
+
+from .output import JsonOption, print_json, print_rows
 
 DbOption = Annotated[
     Path | None,
@@ -27,33 +28,38 @@ def register(app: typer.Typer) -> None:
     sub = typer.Typer(help="The object database (SQLite + a folder of meshes).", no_args_is_help=True)
 
     @sub.command("list")
-    def list_objects(db: DbOption = None) -> None:
+    def list_objects(db: DbOption = None, as_json: JsonOption = False) -> None:
         """List the objects: provenance, size, descriptors, where they came from."""
-        from .main import console
-
         with _open(db, readonly=True) as database:
-            table = Table(box=None, header_style="bold")
-            for column in ("name", "provenance", "extent [m]", "triangles", "descriptors", "world", "run", "scans",
-                           "coverage", "last seen"):
-                table.add_column(column)
-            for rec in database.records():
-                seen = rec.location or {}
-                table.add_row(
-                    rec.name, rec.provenance, str([round(x, 3) for x in rec.extent]), str(rec.triangles),
-                    ",".join(rec.descriptor_kinds) or "-", rec.world or "-", rec.run or "-",
-                    "-" if rec.scans is None else str(rec.scans),
-                    "-" if rec.coverage is None else f"{rec.coverage:.2f}",
-                    f"{seen.get('world') or '-'} {seen.get('time', '')}".strip() if seen else "-",
-                )
-            console.print(table)
+            records = database.records()
+        if as_json:
+            print_json([rec.summary() for rec in records])
+            return
+        rows = []
+        for rec in records:
+            seen = rec.location or {}
+            rows.append([
+                rec.name, rec.provenance, str([round(x, 3) for x in rec.extent]), str(rec.triangles),
+                ",".join(rec.descriptor_kinds) or "-", rec.world or "-", rec.run or "-",
+                "-" if rec.scans is None else str(rec.scans),
+                "-" if rec.coverage is None else f"{rec.coverage:.2f}",
+                f"{seen.get('world') or '-'} {seen.get('time', '')}".strip() if seen else "-",
+            ])
+        print_rows(("name", "provenance", "extent [m]", "triangles", "descriptors", "world", "run", "scans",
+                    "coverage", "last seen"), rows)
 
     @sub.command("show")
-    def show(name: Annotated[str, typer.Argument(help="Object name.")], db: DbOption = None) -> None:
-        """Print one object's record as JSON."""
+    def show(name: Annotated[str, typer.Argument(help="Object name.")], db: DbOption = None,
+             as_json: JsonOption = False) -> None:
+        """Print one object's record (JSON on a terminal too; ``--json``: no colour, one document)."""
         from .main import console
 
         with _open(db, readonly=True) as database:
-            console.print_json(json.dumps(database.get(name, load_mesh=False).summary()))
+            summary = database.get(name, load_mesh=False).summary()
+        if as_json or not console.is_terminal:
+            print_json(summary)
+        else:
+            console.print_json(json.dumps(summary, default=str))
 
     @sub.command("add")
     def add(

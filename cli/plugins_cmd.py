@@ -6,10 +6,11 @@ import dataclasses
 from typing import Annotated
 
 import typer
-from rich.table import Table
 
 from explore.core import BadInput
 from explore.runtime import KINDS
+
+from .output import JsonOption, print_json, print_rows
 
 
 def register(app: typer.Typer) -> None:
@@ -19,26 +20,35 @@ def register(app: typer.Typer) -> None:
     def list_plugins(
         kind: Annotated[str | None, typer.Option("--kind", "-k", help=f"Only this kind ({', '.join(KINDS)}).")] = None,
         params: Annotated[bool, typer.Option("--params", help="Also list every plugin's parameters.")] = False,
+        as_json: JsonOption = False,
     ) -> None:
         """Print kind, name, origin package and a one-line doc of every plugin."""
-        from .main import console, registry
+        from .main import err_console, registry
 
         reg = registry()
         if kind is not None and kind not in KINDS:
             raise BadInput("--kind", None, f"unknown plugin kind {kind!r} (valid: {', '.join(KINDS)})")
-        table = Table(box=None, header_style="bold")
-        for column in ("kind", "name", "origin", "doc"):
-            table.add_column(column)
+        plugins = []
         for info in reg.of_kind(kind):
             clash = reg.clashes.get((info.kind, info.name))
-            origin = " + ".join(clash) + " (clash: unusable)" if clash else info.origin
-            table.add_row(info.kind, info.name, origin, info.doc)
-            if params:
-                effective = reg.effective_defaults(info)
-                for p in info.params:
-                    table.add_row("", "", "", f"  {dataclasses.replace(p, default=effective[p.name]).describe()}")
-        console.print(table)
+            effective = reg.effective_defaults(info)
+            plugins.append((info, clash, [dataclasses.replace(p, default=effective[p.name]) for p in info.params]))
+        if as_json:
+            print_json({"plugins": [
+                {"kind": info.kind, "name": info.name, "origin": " + ".join(clash) if clash else info.origin,
+                 "clash": bool(clash), "doc": info.doc,
+                 "params": [{"name": p.name, "type": getattr(p.type, "__name__", str(p.type)), "default": p.default,
+                             "unit": p.unit, "doc": p.doc} for p in defaults]}
+                for info, clash, defaults in plugins
+            ], "load_errors": reg.load_errors})
+            return
+        rows = []
+        for info, clash, defaults in plugins:
+            rows.append([info.kind, info.name, " + ".join(clash) + " (clash: unusable)" if clash else info.origin,
+                         info.doc])
+            rows += [["", "", "", f"  {p.describe()}"] for p in defaults] if params else []
+        print_rows(("kind", "name", "origin", "doc"), rows)
         for name, error in reg.load_errors.items():
-            console.print(f"could not load plugin package {name}: {error}", style="yellow")
+            err_console.print(f"could not load plugin package {name}: {error}", style="yellow")
 
     app.add_typer(sub, name="plugins")

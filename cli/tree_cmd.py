@@ -9,6 +9,8 @@ import typer
 
 from explore.core import BadInput, check_output
 
+from .output import JsonOption, print_json, print_rows
+
 
 def _load(tree: str):
     from explore.runtime import load_tree
@@ -66,13 +68,14 @@ def register(app: typer.Typer) -> None:
         console.print(f"-> {wanted[0]}")
 
     @sub.command("list")
-    def list_() -> None:
+    def list_(as_json: JsonOption = False) -> None:
         """List the tree files in ./trees, the shipped trees and $EXPLORE_TREES."""
         from explore.runtime import list_trees
 
-        from .main import console
-
-        for path in list_trees():
-            console.print(f"{path.stem:24} {path}")
+        trees = [{"tree": path.stem, "file": str(path)} for path in list_trees()]
+        if as_json:
+            print_json(trees)
+            return
+        print_rows(("tree", "file"), [[t["tree"], t["file"]] for t in trees])
 
     app.add_typer(sub, name="tree")
