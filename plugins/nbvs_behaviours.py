@@ -128,6 +128,7 @@ class TreeNBVS:
         s = self.session
         summary = s.summary()
         s.pvs.save(out_dir / "pvs.npz")
+        s.pvs.save_octomap(out_dir / "pvs.bt")
         points = np.vstack(s.points) if s.points else np.zeros((0, 3))
         if len(points):
             import open3d as o3d

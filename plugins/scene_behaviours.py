@@ -50,6 +50,7 @@ class SceneRun:
             metrics = s.metrics()
             save_scene_png(s, out_dir / "scene.png")
             s.pvs.save(out_dir / "pvs.npz")
+            s.pvs.save_octomap(out_dir / "pvs.bt")
             for name in s.added:
                 (out_dir / "models").mkdir(exist_ok=True)
                 self.database.export(name, out_dir / "models" / f"{name}.ply")

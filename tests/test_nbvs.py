@@ -231,5 +231,5 @@ def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
     assert metrics["planning"]["queries"] >= 6 and metrics["planning"]["success_rate"] > 0.0
     assert metrics["path_length"] > 0.0 and metrics["path_length_m"] > 0.0
     assert len(metrics["ess_per_move"]) == metrics["trajectories"]
-    for name in ("trajectories.png", "coverage.png", "pvs.npz", "points.ply", "trace.jsonl"):
+    for name in ("trajectories.png", "coverage.png", "pvs.npz", "pvs.bt", "points.ply", "trace.jsonl"):
         assert (tmp_path / "run" / name).stat().st_size > 0

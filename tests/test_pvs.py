@@ -379,3 +379,25 @@ def test_agreement_with_octomap_on_a_small_scene(bunny_sim) -> None:
     agreement = np.count_nonzero((theirs == ours) & observed) / np.count_nonzero(observed)
     assert np.count_nonzero(observed) > 8000 and np.count_nonzero(ours == 1) > 250
     assert agreement >= 0.999
+
+
+def test_octomap_binary_export_is_read_back_by_octomap_cell_for_cell(bunny_sim, tmp_path) -> None:
+    """pvs.bt: OctoMap reads every observed voxel back in its maximum-likelihood state, the unobserved
+    ones stay unknown, and uniform blocks are pruned as OctoMap prunes them."""
+    pyoctomap = pytest.importorskip("pyoctomap")
+    from explore.sim import target_for
+
+    rng = np.random.default_rng(1)
+    centre = np.array([0.0, 0.0, 0.58])
+    pvs = PVS.for_region([-0.15, -0.15, 0.45], [0.15, 0.15, 0.75], 0.005)
+    for offset in ([0.3, -0.1, 0.1], [-0.2, 0.22, 0.15]):
+        pvs.integrate(bunny_sim.sensor.acquire(bunny_sim, target_for(bunny_sim.sensor, centre + offset, centre, 0.12),
+                                               rng))
+    nodes = pvs.save_octomap(tmp_path / "pvs.bt")
+    tree = pyoctomap.OcTree(0.1)
+    assert tree.readBinary(str(tmp_path / "pvs.bt"))
+    assert tree.getResolution() == pytest.approx(0.005) and tree.size() == nodes
+    ours = np.where(pvs.log_odds == 0.0, -1, (pvs.log_odds > 0.0).astype(int))
+    assert np.array_equal(octomap_states(tree, pvs), ours)
+    observed = np.count_nonzero(ours >= 0)
+    assert np.count_nonzero(ours == 1) > 300 and observed > 50_000 and nodes < observed  # pruned

@@ -43,7 +43,7 @@ def test_model_object_models_the_bunny_and_is_deterministic(open_world, tmp_path
     assert first["path_length_m"] > first["scan_path_m"] > 0
     assert first["objects"] == [{"name": "bunny", "known": False, "coverage": curve[-1], "result": "modelled"}]
     run = tmp_path / "a"
-    for name in ("model.ply", "model.png", "pvs.npz", "coverage.png", "tree.dot", "trace.jsonl"):
+    for name in ("model.ply", "model.png", "pvs.npz", "pvs.bt", "coverage.png", "tree.dot", "trace.jsonl"):
         assert (run / name).stat().st_size > 0, name
     events = [json.loads(line) for line in (run / "trace.jsonl").read_text().splitlines()]
     kinds = {e["event"] for e in events}

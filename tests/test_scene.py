@@ -86,7 +86,7 @@ def test_scene_exploration_tree_explains_every_object(small_run):
     assert wrong["accepted"] == 0 and wrong["proposed"] == wrong["rejected_q_h"] + wrong["rejected_pvs"] > 0
     assert m["recognition_precision"] == 1.0 and m["recognition_recall"] == 1.0
     out = result.out_dir
-    assert (out / "scene.png").stat().st_size > 10000 and (out / "pvs.npz").is_file()
+    assert (out / "scene.png").stat().st_size > 10000 and (out / "pvs.npz").is_file() and (out / "pvs.bt").is_file()
     assert json.loads((out / "metrics.json").read_text())["views"] == m["views"] <= 30
     # iterative recognition: the modelled sorter is in the database with descriptors and provenance
     with ObjectDatabase.open(db, readonly=True) as database:

@@ -132,6 +132,18 @@ class PVSFeatures:
             "hit_wins": self.hit_wins,
         }
 
+    def save_octomap(self, path: str | Path) -> int:
+        """Write the observed voxels as an OctoMap binary tree (``.bt``, maximum likelihood: log-odds
+        > 0 occupied, < 0 free; unobserved voxels stay unknown); returns the tree's node count."""
+        from explore.mapping.octomap_bt import CENTER, DEPTH, write_bt
+
+        ijk = np.argwhere(self.log_odds != 0.0)
+        keys = ijk + self.lattice + CENTER
+        if len(keys) and (keys.min() < 0 or keys.max() >= 1 << DEPTH):
+            raise ValueError(f"{path}: the PVS reaches beyond OctoMap's key range (+-{CENTER} voxels from the origin)")
+        occupied = self.log_odds[ijk[:, 0], ijk[:, 1], ijk[:, 2]] > 0.0
+        return write_bt(path, keys, occupied, self.resolution)
+
     def save(self, path: str | Path) -> None:
         """Write the PVS (log-odds, parameters, features, filter state) to a ``.npz`` file."""
         arrays = {

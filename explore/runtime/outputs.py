@@ -172,13 +172,15 @@ class ModellingOutputs:
         out_dir = Path(out_dir)
         s = self.session
         metrics = s.metrics()
-        files: dict[str, str | None] = {"mesh": None, "mesh_png": None, "pvs": None, "coverage_png": None}
+        files: dict[str, str | None] = {"mesh": None, "mesh_png": None, "pvs": None, "pvs_octomap": None,
+                                         "coverage_png": None}
         if len(s.surface.mesh.triangles):  # nothing to write before the first scan
             s.surface.save_ply(out_dir / "model.ply")
             s.surface.save_png(out_dir / "model.png", f"{s.sim.spec.name}: {s.n_scans} scans")
             files["mesh"], files["mesh_png"] = "model.ply", "model.png"
         s.pvs.save(out_dir / "pvs.npz")
-        files["pvs"] = "pvs.npz"
+        s.pvs.save_octomap(out_dir / "pvs.bt")
+        files["pvs"], files["pvs_octomap"] = "pvs.npz", "pvs.bt"
         coverage = list(metrics.get("coverage") or [])
         estimate = list(metrics.get("coverage_estimate") or [])
         if estimate:

@@ -114,7 +114,7 @@ def prepare_out_dir(path: Path) -> Path:
 
 
 RUN_FILES = ("trace.jsonl", "metrics.json", "metrics.json.tmp", "tree.dot", "tree.png", "model.ply", "model.png",
-             "pvs.npz", "coverage.png")
+             "pvs.npz", "pvs.bt", "coverage.png")
 
 
 def highest_missing(path: Path) -> Path | None:
