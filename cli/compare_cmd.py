@@ -100,8 +100,10 @@ def build_grid(
 def register(app: typer.Typer) -> None:
     @app.command("compare")
     def compare_cmd(
-        tree: Annotated[str | None, typer.Option("--tree", help="Tree name or file run by every run.")] = None,
-        worlds: Annotated[str | None, typer.Option("--worlds", help="Comma-separated world names or files.")] = None,
+        tree: Annotated[str | None, typer.Option(
+            "--tree", help="Tree name or file run by every run. (required unless --plot-only)")] = None,
+        worlds: Annotated[str | None, typer.Option(
+            "--worlds", help="Comma-separated world names or files. (required unless --plot-only)")] = None,
         strategies: Annotated[
             str | None, typer.Option("--strategies", help="Comma-separated NBV strategies (default: the tree's).")
         ] = None,

@@ -116,7 +116,7 @@ def register(app: typer.Typer) -> None:
     @sub.command("export")
     def export(
         name: Annotated[str, typer.Argument(help="Object name.")],
-        out: Annotated[Path, typer.Argument(help="Output mesh (.ply, .obj or .stl).")],
+        out: Annotated[Path, typer.Option("--out", "-o", help="Output mesh (.ply, .obj or .stl).")],
         db: DbOption = None,
     ) -> None:
         """Write an object's mesh to a file."""
@@ -124,7 +124,7 @@ def register(app: typer.Typer) -> None:
 
         from .main import console
 
-        check_output(out, "OUT", suffixes=(".ply", ".obj", ".stl"))
+        check_output(out, "--out", suffixes=(".ply", ".obj", ".stl"))
         with _open(db, readonly=True) as database:
             path = database.export(name, out)
             console.print(f"wrote {path}")

@@ -23,6 +23,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    rich_markup_mode=None,  # help texts are plain: "[m]" is a unit, not markup
 )
 # markup off by default: user text (names, paths, messages) is printed as it is; "[b]" or ":x:" stay text
 console = Console(markup=False, emoji=False, highlight=False, soft_wrap=True)  # lines are not cut or wrapped

@@ -70,3 +70,37 @@ def test_piped_lists_keep_whole_names_and_paths(database, tmp_path) -> None:
     assert line.endswith(str(deep / "mine.yaml")) and "…" not in worlds
     plugins = _explore("plugins", "list", "--params", "--kind", "strategy")
     assert "…" not in plugins and "utility_params" in plugins
+
+
+def _commands():  # noqa: ANN202
+    """(path, click command) of every explore command and sub-command."""
+    import typer
+    from explore_cli.main import app
+
+    root = typer.main.get_command(app)
+    stack = [((), root)]
+    while stack:
+        path, command = stack.pop()
+        yield path, command
+        for name, sub in getattr(command, "commands", {}).items():
+            stack.append(((*path, name), sub))
+
+
+def test_every_command_help_is_consistent() -> None:
+    """Every option and argument has help text, flags show no value type, units in brackets survive,
+    and an output path is always the ``--out`` option."""
+    import typer
+
+    seen = 0
+    for path, command in _commands():
+        ctx = typer.Context(command, info_name=" ".join(("explore", *path)))
+        text = command.get_help(ctx)
+        assert "<bool>" not in text, path
+        for param in command.params:
+            assert param.name == "help" or getattr(param, "help", None), (path, param.name, "no help text")
+            if param.name == "out":
+                assert "--out" in param.opts, (path, "an output path is the --out option")
+            seen += 1
+    assert seen > 60
+    scan = dict(_commands())[("scan",)]
+    assert "x,y,z [m]" in scan.get_help(typer.Context(scan, info_name="explore scan"))

@@ -181,7 +181,7 @@ def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     assert "cube" in capsys.readouterr().out
     assert main(["db", "show", "cube", "--db", db]) == 0
     assert '"provenance": "given"' in capsys.readouterr().out
-    assert main(["db", "export", "cube", str(tmp_path / "out.obj"), "--db", db]) == 0
+    assert main(["db", "export", "cube", "--out", str(tmp_path / "out.obj"), "--db", db]) == 0
     assert np.allclose(np.ptp(read_mesh(tmp_path / "out.obj").vertices, axis=0), [0.05, 0.025, 0.04])
     capsys.readouterr()
     # bad input: one line on stderr, exit code 2
@@ -217,7 +217,7 @@ def test_reading_never_modifies_a_file(tmp_path, capsys):
     empty = tmp_path / "empty.db"
     empty.write_bytes(b"")
     for argv in (["db", "list", "--db", str(empty)], ["db", "show", "x", "--db", str(empty)],
-                 ["db", "export", "x", str(tmp_path / "x.ply"), "--db", str(empty)]):
+                 ["db", "export", "x", "--out", str(tmp_path / "x.ply"), "--db", str(empty)]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err.strip()
         assert "is empty" in err and len(err.splitlines()) == 1
