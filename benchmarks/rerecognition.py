@@ -45,44 +45,43 @@ def _run(world: str, seed: int, db: Path, out: Path) -> dict:
 
 
 def q_h_calls(metrics: dict, world: str, seed: int) -> list[dict]:
-    """Accepted q_h and the best rejected q_h of every recognised object of one run."""
+    """Per object of one run: the accepted q_h (recognised objects) and the best q_h among the
+    hypotheses it rejected (by the q_h threshold or by the PVS votes), where there were any."""
     calls = []
     for o in metrics.get("objects", []):
-        if o.get("result") != "recognised" or o.get("q_h") is None:
+        rejected = [r for r in o.get("rejected", []) if r.get("q_h") is not None and math.isfinite(r["q_h"])]
+        recognised = o.get("result") == "recognised" and o.get("q_h") is not None
+        if not recognised and not rejected:
             continue
-        rejected = [r["q_h"] for r in o.get("rejected", []) if r.get("q_h") is not None and math.isfinite(r["q_h"])]
-        thresholds = [r["q_h"] - r["margin"] for r in o.get("rejected", []) if r.get("by") == "q_h"]
-        calls.append({"world": world, "seed": seed, "object": o["name"], "accepted": o["q_h"],
-                      "best_rejected": max(rejected) if rejected else None,
+        thresholds = [r["q_h"] - r["margin"] for r in rejected if r.get("by") == "q_h"]
+        calls.append({"world": world, "seed": seed, "object": o["name"], "result": o.get("result"),
+                      "accepted": o["q_h"] if recognised else None,
+                      "best_rejected": max(r["q_h"] for r in rejected) if rejected else None,
                       "threshold": thresholds[0] if thresholds else None})
     return calls
 
 
 def plot_margins(calls: list[dict], path: Path) -> None:
-    """Histograms of the accepted q_h and of the best rejected q_h, with the threshold."""
+    """Histograms of the accepted q_h and of the best rejected q_h per object, with the threshold."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    accepted = [c["accepted"] for c in calls]
+    accepted = [c["accepted"] for c in calls if c["accepted"] is not None]
     rejected = [c["best_rejected"] for c in calls if c["best_rejected"] is not None]
-    gaps = sorted(c["accepted"] - c["best_rejected"] for c in calls if c["best_rejected"] is not None)
-    thresholds = {round(c["threshold"], 6) for c in calls if c["threshold"] is not None}
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
-    bins = [i / 40 for i in range(41)]
-    left.hist(accepted, bins=bins, alpha=0.7, color="tab:green", label=f"accepted ({len(accepted)})")
-    left.hist(rejected, bins=bins, alpha=0.7, color="tab:red", label=f"best rejected ({len(rejected)})")
+    thresholds = sorted({round(c["threshold"], 6) for c in calls if c["threshold"] is not None})
+    fig, ax = plt.subplots(figsize=(8, 4))
+    bins = [i / 50 for i in range(51)]
+    ax.hist(accepted, bins=bins, alpha=0.7, color="tab:green", label=f"accepted, recognised objects ({len(accepted)})")
+    ax.hist(rejected, bins=bins, alpha=0.7, color="tab:red", label=f"best rejected, per object ({len(rejected)})")
     for t in thresholds:
-        left.axvline(t, color="k", linestyle="--", label=f"threshold q_h = {t:g}")
-    left.set_xlabel("q_h (render-and-compare quality, Kriegel Eq. 3.10)")
-    left.set_ylabel("recognised objects")
-    left.legend()
-    right.plot(range(1, len(gaps) + 1), gaps, "o", color="tab:blue")
-    right.axhline(0.0, color="k", linewidth=0.8)
-    right.set_xlabel("recognised objects with a rejected rival, sorted")
-    right.set_ylabel("accepted q_h - best rejected q_h")
-    right.set_title(f"smallest margin {min(gaps):.3f}" if gaps else "no rejected rival")
+        ax.axvline(t, color="k", linestyle="--", label=f"threshold q_h = {t:g}")
+    if accepted and rejected:
+        ax.set_title(f"lowest accepted {min(accepted):.3f}, highest rejected {max(rejected):.3f}")
+    ax.set_xlabel("q_h (render-and-compare quality, Kriegel Eq. 3.10)")
+    ax.set_ylabel("objects")
+    ax.legend(loc="upper left")
     fig.suptitle("How close the recognition calls were (every run of the re-recognition benchmark)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -158,12 +157,15 @@ def main() -> int:
         good = sum(len(r["rerecognised"]) for r in mine)
         complete = sum(1 for r in mine if not r["missed"])
         print(f"\nre-recognised {good} of {total} modelled objects; every one in {complete} of {len(mine)} seeds")
-    rivals = [c for c in calls if c["best_rejected"] is not None]
-    if calls:
-        print(f"\nq_h calls: {len(calls)} recognised objects, accepted q_h {min(c['accepted'] for c in calls):.3f}"
-              f"-{max(c['accepted'] for c in calls):.3f}; {len(rivals)} with a rejected rival, best rejected q_h "
-              + (f"up to {max(c['best_rejected'] for c in rivals):.3f}, smallest margin "
-                 f"{min(c['accepted'] - c['best_rejected'] for c in rivals):.3f}" if rivals else "-"))
+    accepted = [c["accepted"] for c in calls if c["accepted"] is not None]
+    rejected = [c["best_rejected"] for c in calls if c["best_rejected"] is not None]
+    gaps = [c["accepted"] - c["best_rejected"] for c in calls
+            if c["accepted"] is not None and c["best_rejected"] is not None]
+    if accepted:
+        print(f"\nq_h: {len(accepted)} recognised objects accepted at {min(accepted):.3f}-{max(accepted):.3f}; "
+              f"{len(rejected)} objects rejected hypotheses, the best at "
+              + (f"{min(rejected):.3f}-{max(rejected):.3f}" if rejected else "-")
+              + (f"; smallest lead of a recognised object over its best rejected one {min(gaps):.3f}" if gaps else ""))
     return 0
 
 
