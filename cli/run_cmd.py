@@ -42,6 +42,8 @@ def live_view(root: Any, context: Any) -> Group:
     stats.add_row("world", context.sim.spec.name)
     running = [n.name for n in root.iterate() if n.status.value == "RUNNING" and not n.children]
     stats.add_row("step", ", ".join(running) or "-")
+    if context.activity:
+        stats.add_row("doing", context.activity)
     for provider in context.state.values():
         if hasattr(provider, "live_stats"):
             for key, value in provider.live_stats().items():
@@ -76,6 +78,7 @@ def register(app: typer.Typer) -> None:
 
         from explore.core import STYLE, SUCCESS, Terminated
         from explore.runtime import RunConfig, default_out_dir, execute
+        from explore.runtime.progress import ProgressLines
 
         from .main import console, registry
 
@@ -86,15 +89,13 @@ def register(app: typer.Typer) -> None:
         )
         reg = registry()
         interactive = console.is_terminal and not quiet
-        last = {"t": 0.0, "line": ""}
+        last = {"t": 0.0}
+        lines = ProgressLines()
 
         def plain_progress(root: Any, context: Any) -> None:
-            if quiet:
-                return
-            line = context.status_line
-            if line and line != last["line"]:
-                last["line"] = line
-                console.print(f"[{context.elapsed():6.1f} s] {line}", markup=False, highlight=False)
+            line = None if quiet else lines(root, context)
+            if line is not None:
+                console.print(line, markup=False, highlight=False)
 
         if config.out is None:
             config.out = default_out_dir(config)

@@ -228,6 +228,7 @@ class StartNBVS(ExploreBehaviour):
             utility_params={} if expected or utility == AreaFactor.name else params,
             weighting=self.p["weighting"],
         )
+        session.progress = ctx.progress
         adapter = TreeNBVS(session, name)
         ctx.state["nbvs"] = adapter
         self.write("nbvs", adapter)

@@ -158,7 +158,7 @@ class StartScene(ExploreBehaviour):
                 multi_view_views=p["multi_view_views"], noise=p["noise"], planner=config.planner,
                 run_name=ctx.out_dir.name, register=p["register"],
             )
-            session = SceneSession(ctx.sim, ctx.registry, database, settings)
+            session = SceneSession(ctx.sim, ctx.registry, database, settings, progress=ctx.progress)
         except BaseException:
             database.close()
             raise
@@ -216,6 +216,7 @@ class RecogniseObjects(ExploreBehaviour):
         count = 0
         for obj in scene.candidates():
             if obj.status in ("unexplained", "unknown", "ambiguous"):
+                self.context.progress(f"object {obj.id}: matching {len(scene.models)} models")
                 hypotheses = scene.recognition.recognise(obj)
                 count += 1
                 self.context.trace("decision", what="recognise", object=obj.id,
@@ -229,11 +230,13 @@ class ValidateObjects(ExploreBehaviour):
     name = "validate_objects"
     reads = ("scene",)
     writes = ("unknown", "ambiguous", "object")
+    blocking = True  # render-and-compare and the PVS votes take seconds per object
 
     def work(self) -> Outcome:
         scene = _scene(self)
         for obj in scene.candidates():
             if obj.status in ("unexplained", "unknown", "ambiguous") and obj.hypotheses is not None:
+                self.context.progress(f"object {obj.id}: q_h and PVS votes of {len(obj.hypotheses)} hypotheses")
                 scene.recognition.validate(obj)
                 self.context.trace("decision", what="validate", object=obj.id, status=obj.status, model=obj.model,
                                    q_h=obj.q_h, v_h=obj.v_h, q_h_margin=obj.q_h - scene.recognition.min_q_h,

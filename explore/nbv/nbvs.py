@@ -57,6 +57,10 @@ from explore.nbv.nbvs_scoring import Scoring
 from explore.nbv.view_states import STAGES, FixedBeams, ViewRecord, ViewState
 
 
+def _quiet(text: str) -> None:
+    """The default progress callback: nobody is listening."""
+
+
 class NBVSSession(Reporting, Scoring, StateSampling):
     """Vasquez-Gomez NBVS loop, one step at a time (like :class:`explore.nbv.modelling.ModellingSession`).
 
@@ -110,6 +114,7 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         )
 
         self.sim, self.registry, self.robot, self.sensor = sim, registry, sim.robot, sim.sensor
+        self.progress: Callable[[str], None] = _quiet  # what a long step is doing (a run shows it)
         self.expected, self.k = bool(expected), int(k)
         self.n_samples, self.top, self.overlap = int(n_samples), int(top), float(overlap)
         self.bases_per_arm = max(1, int(bases_per_arm))

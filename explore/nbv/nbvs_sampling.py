@@ -113,6 +113,7 @@ class StateSampling:
         kept_pose: list[np.ndarray] = []
         drawn, kept = 0, 0
         while kept < self.n_samples and drawn < self.max_draws:
+            self.progress(f"sampling states: {kept} of {self.n_samples} aim at the region ({drawn} drawn)")
             if base:
                 group, arms = self.bases_per_arm, 64
                 qs = rng.uniform(lo, hi, size=(arms, len(lo)))
@@ -160,9 +161,11 @@ class StateSampling:
         (the paper's stop criterion "surface factor below a threshold", 30 voxels on the
         real robot, applied as a filter: the run stops when no candidate passes).
         """
+        self.progress(f"collision check of {len(states)} states")
         free = [s for s in states if self.problem.is_valid(s.q)]
         self.stages["collision_free"] = len(free)
         if free:
+            self.progress(f"visibility of {len(free)} collision-free states")
             cands = [Candidate(s.pose, "nbvs") for s in free]
             self.visibility.score(cands, self.ctx)
             for s, c in zip(free, cands, strict=True):

@@ -31,7 +31,8 @@ class Scoring:
         EU score the state the controls reach).
         """
         robot, out = self.robot, []
-        for s in states:
+        for i, s in enumerate(states):
+            self.progress(f"motion planning: candidate {i + 1} of {len(states)}, {len(out)} planned")
             goal = s.q.copy()
             if robot.base_dofs:
                 th = robot.base_dofs[2]
@@ -70,7 +71,9 @@ class Scoring:
     def score(self, states: list[ViewState]) -> list[ViewState]:
         """DU at the nominal final state; with ``expected`` also Algorithm 1 (k samples)."""
         robot = self.robot
-        for s in states:
+        for i, s in enumerate(states):
+            self.progress(f"{'expected utility, ' + str(self.k) + ' rollouts' if self.expected else 'utility'}: "
+                          f"candidate {i + 1} of {len(states)}")
             assert s.nominal is not None and s.plan is not None
             final = s.nominal[-1]
             nominal = StateSamples(final[None], robot.fk(final)[None], np.array([s.length]), np.zeros(1))

@@ -69,6 +69,7 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
 
     def initialise(self) -> None:
         self.feedback_message = ""
+        self.context.progress("")
         if self.blocking:
             self._future = self.context.submit(self._held_step)
 

@@ -41,6 +41,7 @@ class RunContext:
         self.state: dict[str, Any] = {}
         self.events: list[dict[str, Any]] = []
         self.status_line = ""
+        self.activity = ""  # what the running step is doing (see progress)
         self.root: Any = None  # the py_trees root once built
         self.rerun: Any = None
         self.sim: Any = None
@@ -117,6 +118,11 @@ class RunContext:
         """Write the held events of a finished step (in the main thread, during the tick)."""
         for record in held:
             self._write(record)
+
+    def progress(self, text: str) -> None:
+        """What the running step is doing now (any thread): shown by the live view and the plain
+        output's progress lines (:class:`explore.runtime.progress.ProgressLines`), not traced."""
+        self.activity = text
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
