@@ -45,16 +45,16 @@ def _run(world: str, seed: int, db: Path, out: Path) -> dict:
 
 
 def q_h_calls(metrics: dict, world: str, seed: int) -> list[dict]:
-    """Per object of one run: the accepted q_h (recognised objects) and the best q_h among the
-    hypotheses it rejected (by the q_h threshold or by the PVS votes), where there were any."""
+    """Per object the run found (``objects_found``): the accepted q_h (recognised objects) and the
+    best q_h among the hypotheses it rejected (by the q_h threshold or by the PVS votes), if any."""
     calls = []
-    for o in metrics.get("objects", []):
-        rejected = [r for r in o.get("rejected", []) if r.get("q_h") is not None and math.isfinite(r["q_h"])]
-        recognised = o.get("result") == "recognised" and o.get("q_h") is not None
+    for o in metrics.get("objects_found", []):
+        rejected = [r for r in o.get("rejected") or [] if r.get("q_h") is not None and math.isfinite(r["q_h"])]
+        recognised = o.get("status") == "recognised" and o.get("q_h") is not None
         if not recognised and not rejected:
             continue
         thresholds = [r["q_h"] - r["margin"] for r in rejected if r.get("by") == "q_h"]
-        calls.append({"world": world, "seed": seed, "object": o["name"], "result": o.get("result"),
+        calls.append({"world": world, "seed": seed, "object": o.get("id"), "result": o.get("status"),
                       "accepted": o["q_h"] if recognised else None,
                       "best_rejected": max(r["q_h"] for r in rejected) if rejected else None,
                       "threshold": thresholds[0] if thresholds else None})

@@ -340,7 +340,9 @@ window.addEventListener('load', function () {
     images: imgs.length,
     rendered: imgs.filter(function (i) { return i.complete && i.naturalWidth > 0 && i.naturalHeight > 0; }).length,
     tables: tables.length,
-    filled: tables.filter(function (t) { return t.rows.length > 1 && t.offsetHeight > 0; }).length
+    filled: tables.filter(function (t) { return t.rows.length > 1 && t.offsetHeight > 0; }).length,
+    page_width: document.documentElement.scrollWidth,
+    window_width: window.innerWidth
   };
   var pre = document.createElement('pre');
   pre.id = 'render-check';
@@ -354,21 +356,28 @@ window.addEventListener('load', function () {
 @pytest.mark.slow
 @pytest.mark.skipif(_chromium() is None, reason="Debian's chromium is not installed (apt-get install chromium)")
 def test_report_renders_every_table_and_image_in_headless_chromium(compared, tmp_path) -> None:
+    """Every image and table renders, and at 1000 px the page needs no sideways scrolling (wide tables
+    scroll in their own box); the screenshot is kept beside the report."""
     page = (compared["out"] / "report.html").read_text()
     assert "src='http" not in page and "<link" not in page  # self-contained
     n_images, n_tables = page.count("<img "), page.count("<table ")
     assert n_images == 4 and n_tables >= 6
     probe = tmp_path / "report.html"
     probe.write_text(page.replace("</body>", CHECK_SCRIPT + "</body>"))
-    done = subprocess.run(
-        [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=5000", "--dump-dom", probe.as_uri()],
-        capture_output=True, text=True, timeout=120,
-    )
+    chromium = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=5000", "--window-size=1000,1400"]
+    done = subprocess.run([*chromium, "--dump-dom", probe.as_uri()], capture_output=True, text=True, timeout=120)
     match = re.search(r'<pre id="render-check">(.*?)</pre>', done.stdout)
     assert match, done.stderr[-2000:]
     result = json.loads(match.group(1))
+    assert result["window_width"] == 1000 and result.pop("page_width") <= result.pop("window_width")
     assert result == {"images": n_images, "rendered": n_images, "tables": n_tables, "filled": n_tables}
+    shot = tmp_path / "report_1000px.png"
+    subprocess.run([*chromium, f"--screenshot={shot}", (compared["out"] / "report.html").as_uri()],
+                   capture_output=True, timeout=120)
+    from PIL import Image
+
+    assert Image.open(shot).size == (1000, 1400)
 
 
 def _free_port() -> int:

@@ -82,16 +82,20 @@ def save_curves_png(
     ylabel: str,
     title: str = "",
 ) -> None:
-    """Line plot of named (x, y) curves."""
+    """Line plot of named (x, y) curves, with a legend; whole-number x (scans, views) gets whole ticks."""
+    from matplotlib.ticker import MaxNLocator
+
     fig, ax = plt.subplots(figsize=(6.5, 4), dpi=110)
     for label, (x, y) in curves.items():
         ax.plot(x, y, marker="o", markersize=3, label=label)
+    if all(np.allclose(np.asarray(x, dtype=float), np.round(np.asarray(x, dtype=float))) for x, _ in curves.values()):
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
     if title:
         ax.set_title(title)
-    if len(curves) > 1:
+    if curves:
         ax.legend()
     fig.tight_layout()
     fig.savefig(path)

@@ -13,6 +13,9 @@ class Reporting:
     def save_trajectories_png(self, path: Any, title: str = "") -> None:
         """Top view: known environment, region, the executed motions (base, or sensor without a
         base), the sensor at every scan and the collisions (red crosses)."""
+        from matplotlib.lines import Line2D
+        from matplotlib.patches import Patch
+
         from explore.core import plt
 
         fig, ax = plt.subplots(figsize=(6.5, 6), dpi=110)
@@ -42,6 +45,14 @@ class Reporting:
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_title(title or f"{len(self.executions)} motions")
+        ax.legend(handles=[
+            Patch(color="0.6", alpha=0.5, label="known environment"),
+            Patch(color="tab:orange", alpha=0.5, label="object"),
+            Patch(fill=False, ls="--", color="tab:green", label="region"),
+            Line2D([], [], color="tab:blue", label="executed motion" + ("" if base else " (sensor)")),
+            Line2D([], [], marker="^", color="k", ls="", label="scan (number)"),
+            Line2D([], [], marker="x", color="red", ls="", mew=2, label="collision"),
+        ], fontsize=8, loc="best")
         ax.grid(alpha=0.3)
         fig.tight_layout()
         fig.savefig(path)

@@ -65,6 +65,8 @@ def row_from_metrics(spec: RunSpec, metrics: dict[str, Any], wall_s: float) -> d
         if key in ID_COLUMNS or key == "settings":
             continue
         row[key] = _flat(value)
+    if metrics.get("planner"):
+        row["planner_used"] = metrics["planner"]  # the grid's "default" names no planner
     row["wall_s"] = None if not math.isfinite(wall_s) else round(wall_s, 3)
     return row
 

@@ -52,7 +52,8 @@ def _png_data(path: Path) -> str:
 
 
 CSS = """
-body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1200px;color:#222}
+body{font-family:system-ui,sans-serif;margin:2em auto;padding:0 1em;max-width:1200px;color:#222}
+.scroll{overflow-x:auto;max-width:100%}
 table{border-collapse:collapse;margin:.5em 0 1.5em}th,td{border:1px solid #bbb;padding:.25em .6em;text-align:right}
 th{background:#eee}td:first-child,th:first-child{text-align:left}.note{color:#555;font-size:.9em}
 figure{margin:1em 0}img{max-width:100%;border:1px solid #ddd}figcaption{color:#555}

@@ -15,6 +15,13 @@ from explore.runtime.report_tables import Table, coverage_at, groups, median, nu
 
 
 # -- plots --------------------------------------------------------------------------------------
+def _whole_numbers() -> Any:
+    """Tick locator for counts (scans): 1, 2, 3, never 1.5."""
+    from matplotlib.ticker import MaxNLocator
+
+    return MaxNLocator(integer=True)
+
+
 def _figure(n_panels: int, width: float = 5.0, height: float = 3.8) -> tuple[Any, list[Any]]:
     import matplotlib
 
@@ -57,6 +64,7 @@ def plot_coverage(rows: Sequence[dict[str, Any]], n_at: int, path: Path) -> Path
             ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.2, linewidth=0)
         ax.set_title(str(world))
         ax.set_xlabel("scans")
+        ax.xaxis.set_major_locator(_whole_numbers())
         ax.set_ylabel("coverage c_a [%]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower right")
@@ -87,6 +95,7 @@ def plot_scans(rows: Sequence[dict[str, Any]], path: Path) -> Path | None:
         ax.set_xticks(range(1, len(parts) + 1), [m for _, m, _ in parts], rotation=20, ha="right", fontsize=8)
         ax.set_title(str(world))
         ax.set_ylabel("scans to termination")
+        ax.yaxis.set_major_locator(_whole_numbers())
         ax.grid(alpha=0.3, axis="y")
     return _save(fig, path)
 
@@ -117,12 +126,20 @@ def plot_planners(table: Table, path: Path) -> Path | None:
         return None
     fig, axes = _figure(2)
     labels = [f"{v['planner']}\n{v['world']}" for v in values]
-    axes[0].bar(labels, [v["planning_success"] * 100 if math.isfinite(v["planning_success"]) else 0 for v in values])
+    worlds = list(dict.fromkeys(v["world"] for v in values))
+    colors = [f"C{worlds.index(v['world']) % 10}" for v in values]
+    axes[0].bar(labels, [v["planning_success"] * 100 if math.isfinite(v["planning_success"]) else 0 for v in values],
+                color=colors)
     axes[0].set_ylabel("planning success [%]")
     axes[0].set_ylim(0, 105)
-    axes[1].bar(labels, [v["planning_time_s"] if math.isfinite(v["planning_time_s"]) else 0 for v in values])
+    axes[1].bar(labels, [v["planning_time_s"] if math.isfinite(v["planning_time_s"]) else 0 for v in values],
+                color=colors)
     axes[1].set_ylabel("planning time per run [s]")
+    from matplotlib.patches import Patch
+
     for ax in axes:
         ax.tick_params(axis="x", labelsize=8)
         ax.grid(alpha=0.3, axis="y")
+        ax.legend(handles=[Patch(color=f"C{i % 10}", label=w) for i, w in enumerate(worlds)],
+                  title="world", fontsize=8)
     return _save(fig, path)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import FINISHED
+from explore.runtime.compare_grid import DEFAULT
 
 STATUSES = (*FINISHED, "crashed", "timeout")
 
@@ -53,8 +54,8 @@ class Table:
         body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in self.rows)
         note = f"<p class='note'>{html.escape(self.note)}</p>" if self.note else ""
         return (
-            f"<section><h3>{html.escape(self.title)}</h3>{note}<table id='{self.key}'>"
-            f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></section>"
+            f"<section><h3>{html.escape(self.title)}</h3>{note}<div class='scroll'><table id='{self.key}'>"
+            f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div></section>"
         )
 
 
@@ -233,6 +234,9 @@ def planner_table(rows: Sequence[dict[str, Any]]) -> Table:
     for row in rows:
         by.setdefault((str(row.get("world")), str(row.get("planner"))), []).append(row)
     for (world, planner), members in by.items():
+        used = {str(r["planner_used"]) for r in members if r.get("planner_used")}
+        if planner == DEFAULT and len(used) == 1:
+            planner = f"{used.pop()} (default)"  # the planner the robot or the registry chose
         done = [r for r in members if r.get("status") in FINISHED]
         value = {
             "world": world, "planner": planner, "runs": len(members),
