@@ -14,7 +14,7 @@ from .output import JsonOption, print_json, print_rows
 
 DbOption = Annotated[
     Path | None,
-    typer.Option("--db", help="Database file (default: $EXPLORE_DB or ./objects.db)."),
+    typer.Option("--db", help="Database file (default: $EXPLORE_DB or runs/objects.db)."),
 ]
 
 

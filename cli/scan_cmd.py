@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
         world: Annotated[str, typer.Option("--world", "-w", help="World name or file.")],
         look_from: Annotated[str, typer.Option("--look-from", help="Sensor position x,y,z [m].")],
         look_at: Annotated[str, typer.Option("--look-at", help="Point the sensor looks at x,y,z [m].")],
-        out: Annotated[Path, typer.Option("--out", "-o", help="Output point cloud (.ply).")] = Path("scan.ply"),
+        out: Annotated[Path, typer.Option("--out", "-o", help="Output point cloud (.ply).")] = Path("runs/scan.ply"),
         sensor: Annotated[
             str | None, typer.Option("--sensor", "-s", help="Sensor plugin (default: the world's).")
         ] = None,

@@ -116,7 +116,7 @@ class StartScene(ExploreBehaviour):
     name = "start_scene"
     writes = ("scene", "done", "explained", "unknown", "ambiguous", "object", "object_done")
     params = (
-        Param("db", str, "", "", "object database file ('': $EXPLORE_DB or ./objects.db, as `explore db`)"),
+        Param("db", str, "", "", "object database file ('': $EXPLORE_DB or runs/objects.db, as `explore db`)"),
         Param("seed_known", bool, True, "", "add the world's `known: true` objects to the database first"),
         Param("segmenter", str, "plane_clusters", "", "segmenter plugin"),
         Param("scale", str, "table", "", "segmenter scale preset (room: 0.05 m / 20 points, table: 0.02 m / 30)",

@@ -202,12 +202,12 @@ def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     assert main(["db", "add", "cube", str(mesh), "--db", str(garbage)]) == 2
     assert "not an explore object database" in capsys.readouterr().err
     assert garbage.read_bytes() == before
-    # $EXPLORE_DB and the default ./objects.db
+    # $EXPLORE_DB and the default runs/objects.db (nothing lands in the current folder by surprise)
     monkeypatch.setenv("EXPLORE_DB", db)
     assert main(["db", "remove", "cube"]) == 0
     monkeypatch.delenv("EXPLORE_DB")
     assert main(["db", "add", "cube", str(mesh)]) == 0
-    assert (tmp_path / "objects.db").is_file()
+    assert (tmp_path / "runs" / "objects.db").is_file() and not (tmp_path / "objects.db").exists()
 
 
 def test_reading_never_modifies_a_file(tmp_path, capsys):

@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from explore.sim import GroundTruthBody, Simulation
 
 PROVENANCES = ("given", "modelled")
-DEFAULT_DB = "objects.db"
+DEFAULT_DB = "runs/objects.db"  # beside the runs that fill it, not in whatever folder a command starts in
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}$")
 
 
@@ -427,7 +427,7 @@ def object_frame(body: GroundTruthBody | TriMesh) -> tuple[Pose, TriMesh]:
 
 
 def default_path() -> Path:
-    """``$EXPLORE_DB`` or ``objects.db`` in the current folder."""
+    """``$EXPLORE_DB`` or ``runs/objects.db`` (the runs folder of the current folder)."""
     return Path(os.environ.get("EXPLORE_DB") or DEFAULT_DB)
 
 
