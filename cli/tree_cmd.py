@@ -38,7 +38,8 @@ def register(app: typer.Typer) -> None:
     def show(
         tree: Annotated[str, typer.Argument(help="Tree name or file.")],
         format: Annotated[str, typer.Option("--format", "-f", help="unicode, dot or png.")] = "unicode",
-        out: Annotated[Path | None, typer.Option("--out", "-o", help="File for dot/png output.")] = None,
+        out: Annotated[Path | None, typer.Option(
+            "--out", "-o", help="File for dot or png output (png: runs/TREE.png, dot: stdout by default).")] = None,
     ) -> None:
         """Print the tree (unicode), or write it as Graphviz dot or PNG."""
         import py_trees
@@ -57,7 +58,8 @@ def register(app: typer.Typer) -> None:
         if format == "dot" and out is None:
             console.print(tree_dot(root).to_string(), markup=False, highlight=False)
             return
-        target = check_output(out, "--out", suffixes=(f".{format}",)) if out else Path(f"{parsed.path.stem}.{format}")
+        default = Path("runs") / f"{parsed.path.stem}.{format}"
+        target = check_output(out, "--out", suffixes=(f".{format}",)) if out else default
         target.parent.mkdir(parents=True, exist_ok=True)
         written = write_tree_diagram(root, target.parent, target.stem)
         wanted = [p for p in written if p.suffix == f".{format}"]
