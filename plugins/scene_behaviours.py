@@ -64,7 +64,8 @@ class SceneRun:
 
 
 def save_scene_png(session: Any, path: Path) -> None:
-    """Top view of the objects' points coloured by how they were explained, with labels."""
+    """Top view of the objects' points coloured by how they were explained. Each object carries its
+    number just above its points; the key beside the plot names it, so labels never pile up."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -72,21 +73,26 @@ def save_scene_png(session: Any, path: Path) -> None:
 
     colours = {"recognised": "tab:green", "modelled": "tab:blue", "ambiguous": "tab:orange",
                "unknown": "tab:red", "modelling": "tab:purple", "unexplained": "tab:gray"}
-    fig, ax = plt.subplots(figsize=(7, 5.5), dpi=110)
+    fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
     if session.table is not None:
         hull = session.table.hull @ session.table.world_T_table[:3, :2].T + session.table.world_T_table[:3, 3]
         ring = np.vstack([hull, hull[:1]])
         ax.plot(ring[:, 0], ring[:, 1], color="0.6", lw=1, label="table hull")
+    names = []
     for obj in session.candidates():
         pts = obj.cluster.points[:: max(1, len(obj.cluster.points) // 3000)]
-        ax.scatter(pts[:, 0], pts[:, 1], s=0.5, color=colours.get(obj.status, "k"))
-        label = obj.model or obj.status
-        ax.annotate(f"{obj.id}: {label}", obj.cluster.centroid[:2], fontsize=7, ha="center")
+        colour = colours.get(obj.status, "k")
+        ax.scatter(pts[:, 0], pts[:, 1], s=0.5, color=colour)
+        top = [float(obj.cluster.centroid[0]), float(pts[:, 1].max())]
+        ax.annotate(str(obj.id), top, textcoords="offset points", xytext=(0, 4), ha="center", va="bottom",
+                    fontsize=8, bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": colour, "alpha": 0.85})
+        names.append(plt.Line2D([], [], ls="", label=f"{obj.id}: {obj.model or '-'} ({obj.status})"))
     eyes = np.array([v.believed[:3, 3] for v in session.views]) if session.views else np.zeros((0, 3))
     if len(eyes):
         ax.plot(eyes[:, 0], eyes[:, 1], "k.", ms=3, label=f"{len(eyes)} views")
     handles = [plt.Line2D([], [], marker="o", ls="", color=c, label=k) for k, c in colours.items()]
-    ax.legend(handles=handles + ax.get_legend_handles_labels()[0], fontsize=7, loc="upper right")
+    ax.legend(handles=handles + ax.get_legend_handles_labels()[0] + names, fontsize=7, loc="upper left",
+              bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
