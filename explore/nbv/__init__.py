@@ -38,9 +38,6 @@ from explore.nbv.view_generator import ViewGenerator
 from explore.nbv.view_states import STAGES, ViewRecord
 
 __all__ = [
-    "standoff_for",
-    "in_environment_boxes",
-    "footprint_width",
     "AreaFactor",
     "BETAS_DEG",
     "CONTINUE",
@@ -71,7 +68,9 @@ __all__ = [
     "candidate_beams",
     "clip_above",
     "expected_utility",
+    "footprint_width",
     "frame_from",
+    "in_environment_boxes",
     "make_strategy",
     "make_target",
     "non_free_count",
@@ -82,4 +81,5 @@ __all__ = [
     "rotation",
     "samples_needed",
     "segments_hit_boxes",
+    "standoff_for",
 ]
