@@ -68,3 +68,10 @@ def test_nbvs_trajectories_have_a_legend(figures, open_world, registry, tmp_path
         session.save_trajectories_png(tmp_path / "trajectories.png")
     labels = [t.get_text() for t in figures[-1].axes[0].get_legend().get_texts()]
     assert {"known environment", "object", "region", "executed motion", "scan (number)", "collision"} <= set(labels)
+
+
+def test_point_cloud_picture_has_a_colour_key(figures, tmp_path) -> None:
+    from explore.core import save_points_png
+
+    save_points_png(np.random.default_rng(0).random((500, 3)), tmp_path / "scan.png")
+    assert [ax.get_ylabel() for ax in figures[0].axes][1:] == ["height z [m]"]

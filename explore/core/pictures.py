@@ -32,15 +32,18 @@ def save_points_png(
     extra: dict[str, Points3] | None = None,
     max_points: int = 40000,
     seed: int = 0,
+    color_label: str = "height z [m]",
 ) -> None:
-    """3-D scatter of a point cloud coloured by height (or by ``colors`` in 0..1)."""
+    """3-D scatter of a point cloud coloured by height (or by ``colors``, named ``color_label``), with a
+    colour bar as its key."""
     fig = plt.figure(figsize=(7, 6), dpi=110)
     ax = fig.add_subplot(projection="3d")
     if len(points):
         pick = np.random.default_rng(seed).permutation(len(points))[:max_points]
         shown = points[pick]
         c = colors[pick] if colors is not None else shown[:, 2]
-        ax.scatter(shown[:, 0], shown[:, 1], shown[:, 2], c=c, s=0.6, cmap="viridis", depthshade=False)
+        cloud = ax.scatter(shown[:, 0], shown[:, 1], shown[:, 2], c=c, s=0.6, cmap="viridis", depthshade=False)
+        fig.colorbar(cloud, ax=ax, shrink=0.6, pad=0.1, label=color_label)
         everything = [shown] + [v for v in (extra or {}).values() if len(v)]
         equal_axes(ax, np.vstack(everything))
     for label, pts in (extra or {}).items():

@@ -37,10 +37,11 @@ class PVSFeatures:
         lo, hi = self.min_corner, self.max_corner
         fig = plt.figure(figsize=(11, 5), dpi=100)
         ax = fig.add_subplot(1, 2, 1)
-        ax.imshow(
+        image = ax.imshow(
             plane.T, origin="lower", cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest",
             extent=(lo[other[0]], hi[other[0]], lo[other[1]], hi[other[1]]),
         )
+        fig.colorbar(image, ax=ax, label="p(occupied): 0 free, 0.5 unknown, 1 occupied")
         names = "xyz"
         ax.set_xlabel(f"{names[other[0]]} [m]")
         ax.set_ylabel(f"{names[other[1]]} [m]")
