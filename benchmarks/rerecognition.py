@@ -54,10 +54,11 @@ def q_h_calls(metrics: dict, world: str, seed: int) -> list[dict]:
         if not recognised and not rejected:
             continue
         thresholds = [r["q_h"] - r["margin"] for r in rejected if r.get("by") == "q_h"]
+        best = max(rejected, key=lambda r: r["q_h"]) if rejected else {}
         calls.append({"world": world, "seed": seed, "object": o.get("id"), "result": o.get("status"),
-                      "accepted": o["q_h"] if recognised else None,
-                      "best_rejected": max(r["q_h"] for r in rejected) if rejected else None,
-                      "threshold": thresholds[0] if thresholds else None})
+                      "accepted": o["q_h"] if recognised else None, "model": o.get("model"),
+                      "best_rejected": best.get("q_h"), "best_rejected_model": best.get("model"),
+                      "best_rejected_by": best.get("by"), "threshold": thresholds[0] if thresholds else None})
     return calls
 
 
