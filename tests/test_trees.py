@@ -321,6 +321,10 @@ def test_tree_picture_labels_are_plain_text(tmp_path, registry) -> None:
     from explore.runtime import tree_dot
 
     root = build(load_tree("model_object", registry).root, registry)
-    labels = [n.get("label") for n in tree_dot(root).get_nodes() if n.get("label")]
+    graph = tree_dot(root)
+    labels = [n.get("label") for n in graph.get_nodes() if n.get("label")]
     assert '"Model object\\n(memory)"' in labels
     assert all(ch.isascii() for label in labels for ch in label)
+    (legend,) = graph.get_subgraphs()  # a key of the node kinds beside the tree
+    assert [n.get("label") for n in legend.get_nodes()] == ["sequence", "selector", "parallel", "decorator",
+                                                              "behaviour"]

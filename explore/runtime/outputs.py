@@ -53,7 +53,30 @@ def tree_dot(root: Any) -> Any:
         if notes:
             plain += "\\n(" + ", ".join(n for n in notes if n) + ")"
         node.set("label", f'"{plain}"')
+    _add_legend(graph)
     return graph
+
+
+# py_trees' node styles (display.dot_tree): what each shape and colour stands for
+LEGEND = (
+    ("sequence", "box", "orange"), ("selector", "octagon", "cyan"), ("parallel", "parallelogram", "gold"),
+    ("decorator", "ellipse", "ghostwhite"), ("behaviour", "ellipse", "gray"),
+)
+
+
+def _add_legend(graph: Any) -> None:
+    """A boxed key of the node kinds beside the tree."""
+    import pydot
+
+    legend = pydot.Cluster("legend", label="legend", fontsize="9", style="dashed", color="gray")
+    names = []
+    for kind, shape, colour in LEGEND:
+        name = f"legend_{kind}"
+        legend.add_node(pydot.Node(name, label=kind, shape=shape, style="filled", fillcolor=colour, fontsize="9"))
+        names.append(name)
+    for a, b in zip(names, names[1:], strict=False):  # stacked in this order
+        legend.add_edge(pydot.Edge(a, b, style="invis"))
+    graph.add_subgraph(legend)
 
 
 def write_tree_diagram(root: Any, out_dir: Path, name: str = "tree") -> list[Path]:
