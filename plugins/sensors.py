@@ -15,7 +15,9 @@ if TYPE_CHECKING:
 
 
 class DepthCamera(RaySensor):
-    """Pinhole depth camera (RGB-D when ``color``), noise none / Kinect sigma(d) ~ d^2 / laser Eq. 4.39."""
+    """Pinhole depth camera (RGB-D when ``color``), noise none / Kinect sigma(d) ~ d^2 / laser Eq. 4.39;
+    optional structured-light artefacts: disparity quantisation, projector shadows, flying pixels and a
+    low-frequency bias (explore.sim.structured_light)."""
 
     name = "depth_camera"
     geometry = "area"
@@ -32,6 +34,14 @@ class DepthCamera(RaySensor):
         Param("rate_hz", float, 30.0, "Hz", "frame rate", low=0.01),
         Param("no_return_clears", bool, True, "", "a beam without return frees the working range"),
         Param("color", bool, False, "", "add colour from pybullet's renderer"),
+        # structured light (explore.sim.structured_light); all off by default
+        Param("baseline", float, 0.075, "m", "projector to camera distance along the camera's x axis", low=1e-4),
+        Param("disparity_step", float, 0.0, "px", "disparity quantisation step (Kinect: 0.125; 0: none)", low=0.0),
+        Param("projector_shadow", bool, False, "", "no return where the projector does not light the surface"),
+        Param("flying_pixels", float, 0.0, "", "probability of a mixed depth on a depth discontinuity",
+              low=0.0, high=1.0),
+        Param("edge_jump", float, 0.03, "m", "depth step to a neighbour that makes a discontinuity", low=1e-4),
+        Param("bias_sigma", float, 0.0, "", "low-frequency per-frame depth bias, in units of sigma(d)", low=0.0),
     )
 
     def __init__(self, **values: object) -> None:
@@ -40,6 +50,49 @@ class DepthCamera(RaySensor):
         if self.max_range <= self.min_range:
             raise ValueError("max_range must exceed min_range")
         self.clear_from_origin = True
+
+    @cached_property
+    def _image_shape(self) -> tuple[int, int]:
+        u, v = self._pixels
+        return len(np.unique(v)), len(np.unique(u))
+
+    @property
+    def casts_shadows(self) -> bool:
+        return bool(self.projector_shadow)
+
+    def lit(self, sim: Simulation, poses: np.ndarray, frame: np.ndarray, points: Points3) -> np.ndarray:
+        """The projector, ``baseline`` along the camera's x axis, must see the point too (nothing
+        closer on the line from the projector to it)."""
+        projector = poses[frame, :3, 3] + self.baseline * poses[frame, :3, 0]
+        towards = points - projector
+        distance = np.linalg.norm(towards, axis=1)
+        t_hit, _, _ = sim.raycaster.cast(projector, towards / distance[:, None])
+        return t_hit >= distance - max(2e-3, 1e-3 * float(np.max(distance, initial=0.0)))
+
+    def measure(self, ranges: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Flying pixels on depth edges, then the range noise, a smooth per-frame bias and the
+        quantised disparity, on the organised depth image (each effect only when switched on)."""
+        from explore.sim.structured_light import flying_pixels, quantise_disparity, smooth_field
+
+        if not (self.flying_pixels > 0 or self.bias_sigma > 0 or self.disparity_step > 0):
+            return super().measure(ranges, cos_incidence, rng)
+        along = self.local_directions()[:, 2]  # depth z = range * cos(angle to the optical axis)
+        frames = len(ranges) // len(along)
+        image = (frames, *self._image_shape)
+        if self.flying_pixels > 0:
+            z = flying_pixels((ranges.reshape(frames, -1) * along).reshape(image), self.edge_jump,
+                              self.flying_pixels, rng)
+            ranges = (z.reshape(frames, -1) / along).ravel()
+        ranges = super().measure(ranges, cos_incidence, rng)
+        if self.bias_sigma > 0:
+            bias = self.bias_sigma * smooth_field(*image, rng).ravel()
+            ranges = ranges + bias * self.sigma(np.nan_to_num(ranges))
+        if self.disparity_step > 0:
+            z = ranges.reshape(frames, -1) * along
+            z = quantise_disparity(z, float(self.intrinsics[0, 0]), self.baseline, self.disparity_step)
+            ranges = (z / along).ravel()
+        ranges[(ranges < self.min_range) | (ranges > self.max_range)] = np.nan
+        return ranges
 
     @property
     def intrinsics(self) -> np.ndarray:

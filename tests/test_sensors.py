@@ -110,3 +110,104 @@ def test_world_spec_is_a_value(tmp_path) -> None:
     spec = load_world_spec(path)
     assert isinstance(spec, WorldSpec) and spec.sensor.plugin == "depth_camera"
     np.testing.assert_allclose(spec.region_size, [2, 2, 1])
+
+
+STEP = WALL.replace("name: wall\n", "name: step\n").replace(
+    "objects: []", "  - {name: box, box: [0.2, 0.2, 0.2], position: [0.0, 0.0, 0.1]}\nobjects: []")
+
+
+@pytest.fixture
+def step_sim(open_world, tmp_path):
+    """The wall (floor at z = 0) with a 20 cm box on it, seen from 1.2 m straight above."""
+    path = tmp_path / "step.yaml"
+    path.write_text(STEP)
+    with open_world(load_world_spec(path)) as sim:
+        yield sim
+
+
+def _depth(scan, pose) -> np.ndarray:
+    """Depth z along the optical axis of every beam (NaN: no return)."""
+    return scan.ranges * (scan.directions @ pose[:3, 2])
+
+
+def test_disparity_quantisation_gives_depth_levels_spaced_as_z_squared(wall_sim, registry, rng) -> None:
+    """Kinect-like 1/8 px disparity steps: every depth is f b / (k / 8), and neighbouring levels are
+    z^2 step / (f b) apart (explore.sim.structured_light)."""
+    from explore.sim.structured_light import depth_level_spacing
+
+    camera = _camera(registry, noise="none", max_range=3.0, width=320, height=240, disparity_step=0.125)
+    f, b = float(camera.intrinsics[0, 0]), camera.baseline
+    pose = look_at([0.0, -1.2, 1.0], [0.0, 0.3, 0.0])  # an oblique view: depth 1.2-2.5 m across the image
+    z = _depth(camera.acquire(wall_sim, pose, rng), pose)
+    exact = _depth(_camera(registry, noise="none", max_range=3.0, width=320, height=240).acquire(wall_sim, pose, rng),
+                   pose)
+    z, exact = z[np.isfinite(z)], exact[np.isfinite(z)]
+    disparity_steps = f * b / z / 0.125
+    np.testing.assert_allclose(disparity_steps, np.round(disparity_steps), atol=1e-6)
+    levels = np.unique(np.round(z, 9))
+    spacing = np.diff(levels)
+    mid = 0.5 * (levels[1:] + levels[:-1])
+    np.testing.assert_allclose(spacing, depth_level_spacing(mid, f, b, 0.125), rtol=0.01)
+    assert np.all(np.abs(z - exact) <= 0.5 * depth_level_spacing(z, f, b, 0.125) * 1.01 + 1e-9)
+    assert len(levels) > 50 and spacing.max() > 2 * spacing.min()  # coarser far away
+
+
+def test_projector_shadow_behind_a_step_edge_has_the_triangulated_width(step_sim, registry, rng) -> None:
+    """The projector sits ``baseline`` along the camera's x axis (world -y here); beside the box, on the
+    far side from it, the floor gets no light out to (b - x0) h / (H - h) from the box's edge, of
+    which the camera sees the part beyond its own occlusion (x0 h / (H - h))."""
+    pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
+    assert np.allclose(pose[:3, 0], [0.0, -1.0, 0.0])
+    seen = _camera(registry, noise="none", width=320, height=240).acquire(step_sim, pose, rng)
+    shadowed = _camera(registry, noise="none", width=320, height=240, projector_shadow=True).acquire(step_sim, pose,
+                                                                                                   rng)
+    lost = seen.hits & ~shadowed.hits
+    assert not (shadowed.hits & ~seen.hits).any()
+    np.testing.assert_array_equal(seen.ranges[shadowed.hits], shadowed.ranges[shadowed.hits])
+    points = seen.origins[lost] + seen.directions[lost] * seen.ranges[lost, None]
+    b, x0, h, height = 0.075, -0.1, 0.2, 1.2  # camera-x coordinate of the box's far edge is -0.1 (world y = +0.1)
+    width = (b - x0) * h / (height - h)
+    pixel = 2 * height * np.tan(np.deg2rad(29.0)) / 320
+    camera_sees_from = 0.1 * height / (height - h)
+    assert len(points) > 100 and np.allclose(points[:, 2], 0.0, atol=1e-6)  # on the floor
+    assert camera_sees_from - 1e-6 <= points[:, 1].min() < camera_sees_from + pixel
+    assert 0.1 + width - pixel < points[:, 1].max() <= 0.1 + width + 1e-6
+    assert np.abs(points[:, 0]).max() < 0.1 * height / (height - h) + pixel  # only beside that edge
+
+
+def test_flying_pixels_appear_only_on_depth_discontinuities(step_sim, registry, rng) -> None:
+    from explore.sim.structured_light import discontinuity_mask
+
+    pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
+    clean = _camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng)
+    flying = _camera(registry, noise="none", width=160, height=120, flying_pixels=1.0).acquire(step_sim, pose, rng)
+    z0, z1 = _depth(clean, pose).reshape(1, 120, 160), _depth(flying, pose).reshape(1, 120, 160)
+    between = (z1 > 1.0 + 1e-6) & (z1 < 1.2 - 1e-6)
+    assert not ((z0 > 1.0 + 1e-6) & (z0 < 1.2 - 1e-6)).any()
+    edge = discontinuity_mask(z0, 0.03)
+    assert between.sum() >= 0.4 * edge.sum() > 0 and not (between & ~edge).any()
+    np.testing.assert_array_equal(z1[~edge], z0[~edge])
+
+
+def test_low_frequency_bias_correlates_neighbouring_pixels(wall_sim, registry) -> None:
+    """bias_sigma 1: a smooth per-frame field of the noise's own size on top of the white noise, so
+    neighbouring residuals correlate by about 1/2 and the total is about sqrt(2) sigma."""
+    pose = look_at([0.0, 0.0, 1.5], [0.0, 0.0, 0.0])
+
+    def residuals(**params) -> np.ndarray:  # noqa: ANN003
+        camera = _camera(registry, max_range=3.0, width=80, height=60, **params)
+        rng = np.random.default_rng(5)
+        out = []
+        for _ in range(40):
+            scan = camera.acquire(wall_sim, pose, rng)
+            true = 1.5 / (scan.directions @ pose[:3, 2])
+            out.append(((scan.ranges - true) / sigma_kinect(true)).reshape(60, 80))
+        return np.array(out)
+
+    def neighbour_correlation(r: np.ndarray) -> float:
+        return float(np.corrcoef(r[:, :, :-1].ravel(), r[:, :, 1:].ravel())[0, 1])
+
+    white, biased = residuals(), residuals(bias_sigma=1.0)
+    assert abs(neighbour_correlation(white)) < 0.03 and white.std() == pytest.approx(1.0, abs=0.03)
+    assert neighbour_correlation(biased) == pytest.approx(0.5, abs=0.1)
+    assert biased.std() == pytest.approx(np.sqrt(2.0), abs=0.15)

@@ -120,6 +120,9 @@ class RaySensor(Plugin, ABC):
         cos_incidence = np.abs(np.einsum("ij,ij->i", normals, directions))
         grazing = cos_incidence < np.cos(np.deg2rad(self.max_incidence_deg))
         valid = np.isfinite(t_hit) & (t_hit >= self.min_range) & (t_hit <= self.max_range) & ~grazing
+        if self.casts_shadows and valid.any():
+            points = origins[valid] + directions[valid] * t_hit[valid, None]
+            valid[np.flatnonzero(valid)[~self.lit(sim, poses, frame[valid], points)]] = False
         ranges = self.measure(np.where(valid, t_hit, np.nan), cos_incidence, rng)
         sigmas = np.where(np.isfinite(ranges), self.sigma(np.nan_to_num(ranges)), np.nan)
         return Scan(
@@ -137,6 +140,17 @@ class RaySensor(Plugin, ABC):
             sensor=self.name,
             colors=self.colors(sim, poses) if getattr(self, "color", False) else None,
         )
+
+    @property
+    def casts_shadows(self) -> bool:
+        """Whether the sensor's emitter sits beside the camera (then :meth:`lit` is asked)."""
+        return False
+
+    def lit(self, sim: Simulation, poses: np.ndarray, frame: np.ndarray, points: Points3) -> np.ndarray:
+        """Which surface ``points`` (n, 3, world; seen in frame ``frame`` (n,) of ``poses``) the
+        sensor's own emitter reaches (n,) bool: a projector or laser beside the camera casts
+        shadows the camera sees into. Default: all (an emitter at the camera's centre)."""
+        return np.ones(len(points), dtype=bool)
 
     def measure(self, ranges: Array, cos_incidence: Array, rng: np.random.Generator) -> Array:
         """Measured ranges (n,) from the true ones (NaN: no return) and |cos| of the incidence
