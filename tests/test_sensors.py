@@ -211,3 +211,40 @@ def test_low_frequency_bias_correlates_neighbouring_pixels(wall_sim, registry) -
     assert abs(neighbour_correlation(white)) < 0.03 and white.std() == pytest.approx(1.0, abs=0.03)
     assert neighbour_correlation(biased) == pytest.approx(0.5, abs=0.1)
     assert biased.std() == pytest.approx(np.sqrt(2.0), abs=0.15)
+
+
+def test_jump_edge_filter_removes_every_flying_pixel_and_little_else(step_sim, registry, rng) -> None:
+    """explore.perception.filter_depth_scan on the step edge with flying pixels everywhere they can be:
+    at most 5 % of the points floating between the box top and the floor remain (two neighbouring
+    flying pixels of nearly the same depth shield each other from a single-pass filter), and at
+    least 95 % of the pixels away from the edge stay."""
+    from explore.perception import filter_depth_scan
+    from explore.sim.structured_light import discontinuity_mask
+
+    pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
+    camera = _camera(registry, noise="none", width=160, height=120, flying_pixels=1.0)
+    scan = camera.acquire(step_sim, pose, rng)
+    floating = lambda s: int(np.count_nonzero((_depth(s, pose) > 1.0 + 1e-6) & (_depth(s, pose) < 1.2 - 1e-6)))  # noqa: E731
+    clean = filter_depth_scan(scan, 120, 160)
+    assert floating(scan) > 50 and floating(clean) <= 0.05 * floating(scan)
+    exact = _camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng)
+    edge = discontinuity_mask(_depth(exact, pose).reshape(1, 120, 160), 0.03)[0].ravel()
+    kept = {tuple(np.round(d, 9)) for d in clean.directions}
+    kept_away = sum(tuple(np.round(d, 9)) in kept for d in scan.directions[~edge & scan.hits])
+    assert kept_away >= 0.95 * np.count_nonzero(~edge & scan.hits)
+    assert clean.hits.all() and len(clean.ranges) < len(scan.ranges)  # dropped, not turned into free space
+
+
+def test_median_depth_halves_the_noise_on_a_plane(wall_sim, registry, rng) -> None:
+    from explore.perception import median_depth
+
+    pose = look_at([0.0, 0.0, 1.5], [0.0, 0.0, 0.0])
+    scan = _camera(registry, max_range=3.0, width=160, height=120).acquire(wall_sim, pose, rng)
+    z = _depth(scan, pose).reshape(120, 160)
+    smooth = median_depth(z, 5)
+    inner = (slice(2, -2), slice(2, -2))
+    assert np.std(smooth[inner] - 1.5) < 0.5 * np.std(z[inner] - 1.5)
+    assert abs(np.mean(smooth[inner]) - 1.5) < 2e-4
+    hole = z.copy()
+    hole[60, 80] = np.nan
+    assert np.isnan(median_depth(hole, 3)[60, 80]) and median_depth(hole, 3)[60, 81] == hole[60, 81]
