@@ -8,8 +8,11 @@ axis, NaN where there is no return):
 - **disparity quantisation**: the disparity f b / z is measured in steps of ``step`` pixels
   (1/8 px on the Kinect), so depth comes in levels whose spacing grows with z^2:
   dz = z^2 step / (f b);
-- **projector shadows**: a surface the camera sees but the projector does not light (behind a
-  step edge, on the projector's side) returns nothing;
+- **projector shadows**: a surface the camera sees but the projector does not light (beside a
+  step edge, on the far side from the projector) returns nothing. Like a real camera's zero
+  pixel, it cannot be told from a beam that met nothing: with ``no_return_clears`` the PVS then
+  frees that beam's working range, so a map built with shadows on should not clear on misses;
+
 - **flying pixels** (edge fattening): a pixel on a depth discontinuity mixes the two surfaces
   and returns a depth between them;
 - **correlated noise**: a low-frequency bias per frame (calibration drift, temperature),
