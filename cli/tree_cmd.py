@@ -58,8 +58,7 @@ def register(app: typer.Typer) -> None:
         if format == "dot" and out is None:
             console.print(tree_dot(root).to_string(), markup=False, highlight=False)
             return
-        default = Path("runs") / f"{parsed.path.stem}.{format}"
-        target = check_output(out, "--out", suffixes=(f".{format}",)) if out else default
+        target = check_output(out or Path("runs") / f"{parsed.path.stem}.{format}", "--out", suffixes=(f".{format}",))
         target.parent.mkdir(parents=True, exist_ok=True)
         written = write_tree_diagram(root, target.parent, target.stem)
         wanted = [p for p in written if p.suffix == f".{format}"]

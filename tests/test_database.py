@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import shutil
 import sqlite3
 from pathlib import Path
 
@@ -208,6 +209,14 @@ def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("EXPLORE_DB")
     assert main(["db", "add", "cube", str(mesh)]) == 0
     assert (tmp_path / "runs" / "objects.db").is_file() and not (tmp_path / "objects.db").exists()
+    capsys.readouterr()
+    shutil.rmtree(tmp_path / "runs")
+    (tmp_path / "runs").write_text("a file where the default database's folder would go")
+    for argv in (["db", "add", "cube", str(mesh)], ["tree", "show", "model_object", "--format", "png"]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "runs" in err, err
+    assert (tmp_path / "runs").read_text().startswith("a file")
 
 
 def test_reading_never_modifies_a_file(tmp_path, capsys):

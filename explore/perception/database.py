@@ -121,7 +121,10 @@ class ObjectDatabase:
         if not path.exists():
             if not create or readonly:
                 raise BadInput(str(path), None, "no such object database (create one with `explore db add`)")
-            path.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as error:  # e.g. runs/ is a file (runs/objects.db is the default)
+                raise BadInput(str(path), None, f"cannot create its folder {path.parent}: {error.strerror}") from None
         else:
             validate_existing(path)
         if readonly:
