@@ -31,8 +31,9 @@ def register(app: typer.Typer) -> None:
         plugins = []
         for info in reg.of_kind(kind):
             clash = reg.clashes.get((info.kind, info.name))
-            effective = reg.effective_defaults(info)
-            plugins.append((info, clash, [dataclasses.replace(p, default=effective[p.name]) for p in info.params]))
+            effective = reg.effective_defaults(info) if params or as_json else {}  # only where shown
+            plugins.append((info, clash, [dataclasses.replace(p, default=effective[p.name]) for p in info.params
+                                          if p.name in effective]))
         if as_json:
             print_json({"plugins": [
                 {"kind": info.kind, "name": info.name, "origin": " + ".join(clash) if clash else info.origin,

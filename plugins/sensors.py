@@ -51,10 +51,9 @@ class DepthCamera(RaySensor):
             raise ValueError("max_range must exceed min_range")
         self.clear_from_origin = True
 
-    @cached_property
+    @property
     def _image_shape(self) -> tuple[int, int]:
-        u, v = self._pixels
-        return len(np.unique(v)), len(np.unique(u))
+        return len(range(0, self.height, self.subsample)), len(range(0, self.width, self.subsample))
 
     @property
     def casts_shadows(self) -> bool:

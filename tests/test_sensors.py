@@ -18,11 +18,16 @@ sensor: depth_camera
 """
 
 
+def _world_from(text: str, open_world, folder):  # noqa: ANN001, ANN202
+    """A simulation of the world written in ``text`` (YAML)."""
+    path = folder / "world.yaml"
+    path.write_text(text)
+    return open_world(load_world_spec(path))
+
+
 @pytest.fixture
 def wall_sim(open_world, tmp_path):
-    path = tmp_path / "wall.yaml"
-    path.write_text(WALL)
-    with open_world(load_world_spec(path)) as sim:
+    with _world_from(WALL, open_world, tmp_path) as sim:
         yield sim
 
 
@@ -119,9 +124,7 @@ STEP = WALL.replace("name: wall\n", "name: step\n").replace(
 @pytest.fixture
 def step_sim(open_world, tmp_path):
     """The wall (floor at z = 0) with a 20 cm box on it, seen from 1.2 m straight above."""
-    path = tmp_path / "step.yaml"
-    path.write_text(STEP)
-    with open_world(load_world_spec(path)) as sim:
+    with _world_from(STEP, open_world, tmp_path) as sim:
         yield sim
 
 

@@ -19,25 +19,13 @@ import dataclasses
 import numpy as np
 
 from explore.sim import Scan
+from explore.sim.structured_light import discontinuity_mask
 
 
 def jump_edges(z: np.ndarray, max_ratio: float = 0.02) -> np.ndarray:
-    """(rows, cols) bool: pixels with a return that have a 4-neighbour (with a return) whose depth
-    differs by more than ``max_ratio`` * z."""
-    valid = np.isfinite(z)
-    filled = np.where(valid, z, np.nan)
-    edge = np.zeros(z.shape, dtype=bool)
-    for axis in (0, 1):
-        a = filled.take(range(z.shape[axis] - 1), axis=axis)
-        b = filled.take(range(1, z.shape[axis]), axis=axis)
-        with np.errstate(invalid="ignore"):
-            jump = np.abs(a - b) > max_ratio * np.fmin(a, b)
-        lo = [slice(None)] * 2
-        hi = [slice(None)] * 2
-        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-        edge[tuple(lo)] |= jump
-        edge[tuple(hi)] |= jump
-    return edge & valid
+    """Pixels with a return (images along the last two axes) that have a 4-neighbour with a return
+    whose depth differs by more than ``max_ratio`` times the nearer depth."""
+    return discontinuity_mask(z, max_ratio, relative=True, missing_is_far=False)
 
 
 def median_depth(z: np.ndarray, size: int = 3) -> np.ndarray:
@@ -59,12 +47,9 @@ def filter_depth_scan(scan: Scan, rows: int, cols: int, max_ratio: float = 0.02,
     beams without a return, which would declare the space in front of the sensor free."""
     optical = np.einsum("ij,ij->i", scan.directions, scan.sensor_poses[scan.frame_of_beam][:, :3, 2])
     z = (scan.ranges * optical).reshape(-1, rows, cols)
-    drop = np.zeros(z.shape, dtype=bool)
-    for frame in range(len(z)):
-        if median:
-            z[frame] = median_depth(z[frame], median)
-        drop[frame] = jump_edges(z[frame], max_ratio)
-    keep = ~drop.ravel()
+    if median:
+        z = np.array([median_depth(image, median) for image in z])
+    keep = ~jump_edges(z, max_ratio).ravel()
     ranges = (z.ravel() / optical)[keep]
     return dataclasses.replace(
         scan, origins=scan.origins[keep], directions=scan.directions[keep], ranges=ranges,

@@ -39,15 +39,20 @@ def depth_level_spacing(z: Array, focal_px: float, baseline: float, step: float)
     return np.square(z) * step / (focal_px * baseline)
 
 
-def discontinuity_mask(z: np.ndarray, jump: float) -> np.ndarray:
-    """Pixels (frames, rows, cols) with a 4-neighbour whose depth differs by more than ``jump``
-    (a neighbour without a return counts as a jump to the far end)."""
-    far = np.where(np.isfinite(z), z, np.inf)
+def discontinuity_mask(z: np.ndarray, jump: float, relative: bool = False, missing_is_far: bool = True) -> np.ndarray:
+    """Pixels with a return (same shape as ``z``, images along the last two axes) that have a
+    4-neighbour whose depth differs by more than ``jump`` metres (``relative``: ``jump`` times the
+    nearer of the two depths). A neighbour without a return counts as a jump to the far end when
+    ``missing_is_far``, and as no neighbour otherwise."""
+    far = np.where(np.isfinite(z), z, np.inf if missing_is_far else np.nan)
     edge = np.zeros(z.shape, dtype=bool)
-    for axis in (1, 2):
-        step = np.abs(np.diff(far, axis=axis)) > jump
-        lo = [slice(None)] * 3
-        hi = [slice(None)] * 3
+    for axis in (-2, -1):
+        n = z.shape[axis]
+        a, b = np.take(far, range(n - 1), axis=axis), np.take(far, range(1, n), axis=axis)
+        with np.errstate(invalid="ignore"):
+            step = np.abs(a - b) > (jump * np.fmin(a, b) if relative else jump)
+        lo = [slice(None)] * z.ndim
+        hi = [slice(None)] * z.ndim
         lo[axis], hi[axis] = slice(None, -1), slice(1, None)
         edge[tuple(lo)] |= step
         edge[tuple(hi)] |= step
