@@ -72,19 +72,11 @@ def flying_pixels(z: np.ndarray, jump: float, probability: float, rng: np.random
 
 
 def smooth_field(frames: int, rows: int, cols: int, rng: np.random.Generator, cells: int = 4) -> np.ndarray:
-    """A random field (frames, rows, cols), mean 0 and unit variance on average over the image, that
-    varies over about 1/``cells`` of the image: Gaussian values on a coarse grid, bilinearly
-    interpolated."""
-    grid = rng.normal(size=(frames, cells + 1, cells + 1))
-    v = np.linspace(0.0, cells, rows)
-    u = np.linspace(0.0, cells, cols)
-    v0 = np.minimum(v.astype(int), cells - 1)
-    u0 = np.minimum(u.astype(int), cells - 1)
-    fv, fu = (v - v0)[None, :, None], (u - u0)[None, None, :]
-    a = grid[:, v0][:, :, u0]
-    b = grid[:, v0][:, :, u0 + 1]
-    c = grid[:, v0 + 1][:, :, u0]
-    d = grid[:, v0 + 1][:, :, u0 + 1]
-    field = (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * d)
-    # bilinear interpolation shrinks the variance; rescale to unit standard deviation per frame
-    return field / np.sqrt((((1 - fv) ** 2 + fv**2) * ((1 - fu) ** 2 + fu**2)).mean())
+    """A random field (frames, rows, cols), mean about 0 and unit standard deviation per frame,
+    that varies over about 1/``cells`` of the image: Gaussian values on a coarse grid, resized
+    bilinearly (``cv2.resize``)."""
+    import cv2
+
+    grid = rng.normal(size=(frames, cells + 1, cells + 1)).astype(np.float32)
+    field = np.array([cv2.resize(g, (cols, rows), interpolation=cv2.INTER_LINEAR) for g in grid], dtype=float)
+    return field / field.std(axis=(1, 2), keepdims=True)
