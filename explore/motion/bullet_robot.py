@@ -13,7 +13,7 @@ import numpy as np
 
 from explore.core import Array, Points3, Pose, quaternion_xyzw, wrap_angle
 from explore.motion.collision import BulletCollider, Part
-from explore.motion.noise import truncated_normal, truncated_normal_logpdf
+from explore.motion.noise import STILL, truncated_normal, truncated_normal_logpdf
 from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Robot
 from explore.sim import frame_pose, p
@@ -309,6 +309,7 @@ class BulletRobot(Robot):
                         c, s = math.cos(q[ith]), math.sin(q[ith])
                         u[:3] = (c * step_xy[0] + s * step_xy[1], -s * step_xy[0] + c * step_xy[1], w)
                 u[nb:] = (target[self.joint_dofs] - q[self.joint_dofs]) / self.dt
+                u[np.abs(u) < STILL] = 0.0  # round-off, not a command: a part standing still does not err
                 controls.append(u)
                 configs.append(self.propagate(q, u, self.dt))
         nc = nb + len(self.joint_dofs)
@@ -346,7 +347,7 @@ class BulletRobot(Robot):
         does not drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
         n_controls = self.n_base_controls + len(self.joint_dofs)
         controls = np.asarray(controls, dtype=float).reshape(len(controls), n_controls)  # (0, n) for a plan in place
-        moving = np.abs(controls) > 1e-12
+        moving = np.abs(controls) > STILL
         for group in self.noise_groups():
             moving[:, group] = moving[:, group].any(axis=1, keepdims=True)
         return moving

@@ -9,8 +9,12 @@ import numpy as np
 
 from explore.core import Array
 
-
 # -- noise model (Vasquez-Gomez Sec. A6) -----------------------------------------------------
+#: a velocity command below this (m/s or rad/s) is round-off, not a command: that part stands
+#: still and does not err
+STILL = 1e-9
+
+
 def truncated_normal(rng: np.random.Generator, sigma: Array, size: int, beta: float = 3.0) -> np.ndarray:
     """(size, len(sigma)) zero-mean normal samples truncated to |e| <= beta * sigma (rejection)."""
     sigma = np.asarray(sigma, dtype=float)
