@@ -25,6 +25,7 @@
 # The names other packages use (they import from the package, never from its modules).
 from explore.motion.bullet_robot import BulletRobot
 from explore.motion.collision import BulletCollider, Part, self_collision_pairs
+from explore.motion.feedback import Rollouts, control_pieces, follow_plan
 from explore.motion.geometric import OPTIONAL_GEOMETRIC, geometric_planner_names, plan, planner_class, straight_line
 from explore.motion.kernels import rigid_step_hit
 from explore.motion.kinodynamic import control_planner_names, plan_kinodynamic
@@ -61,11 +62,14 @@ __all__ = [
     "Part",
     "PlanarChecker",
     "Robot",
+    "Rollouts",
     "ScanPathIK",
     "WALL_FACTOR",
     "box_distance",
     "classify_blocked",
+    "control_pieces",
     "control_planner_names",
+    "follow_plan",
     "geometric_planner_names",
     "linear_scan_path_ik",
     "path_is_valid",
