@@ -175,7 +175,8 @@ NBVS_WORLD = "cluttered"
 
 
 def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...] = (), views: int | None = None,
-              runs_file: str | None = None, approaches: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+              runs_file: str | None = None, approaches: tuple[str, ...] = (), world: str = NBVS_WORLD,
+              session_params: dict[str, Any] | None = None) -> list[dict[str, Any]]:
     """Vasquez-Gomez Table 5: DU (no noise), DU-MU and EU-MU for each k, one row per approach.
 
     Every finished run is appended to ``runs_file`` (JSON lines) and found there again on a
@@ -200,21 +201,24 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
                     run = json.loads(line)
                 except json.JSONDecodeError:  # a line cut short by an interrupt: that run is repeated
                     continue
-                done[(run["approach"], run["k"], run["seed"], run["max_views"])] = run
+                done[(run.get("world", NBVS_WORLD), run["approach"], run["k"], run["seed"], run["max_views"],
+                      run.get("relocalise", False), run.get("weighting", "probability"))] = run
+    params = {"relocalise": True, "weighting": "mean", **(session_params or {})}
     rows = []
     for approach, expected, k, noise in configs:
         runs = []
         for seed in seed_list:
-            key = (approach, k, seed, views)
+            key = (world, approach, k, seed, views, params["relocalise"], params["weighting"])
             if key not in done:
                 t0 = time.perf_counter()
-                with Simulation(NBVS_WORLD, registry) as sim:
+                with Simulation(world, registry) as sim:
                     session = NBVSSession(sim, registry, expected=expected, k=k, seed=seed, max_views=views,
-                                          noise=noise)
+                                          noise=noise, **params)
                     summary = session.run(lambda r, a=approach, s=seed, kk=k: log(
                         f"  {a} k={kk} seed {s} view {r.index}: coverage {r.coverage:.3f}  collided {r.collided}  "
                         f"ess {r.ess if r.ess is None else round(r.ess, 1)}  stages {r.stages}"))
-                summary.update({"approach": approach, "k": k, "seed": seed, "max_views": views,
+                summary.update({"world": world, **params, "approach": approach, "k": k, "seed": seed,
+                                "max_views": views,
                                 "seconds": time.perf_counter() - t0, "travelled_m": session.travelled_m()})
                 summary = json.loads(json.dumps(summary, default=float))
                 done[key] = summary
@@ -230,7 +234,7 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
         cov = [r["final_coverage"] for r in runs]
         ess = [e for r in runs for e in r["ess"] if e is not None]
         rows.append({
-            "part": "nbvs", "world": NBVS_WORLD, "approach": approach, "k": k if expected else None,
+            "part": "nbvs", "world": world, "approach": approach, "k": k if expected else None,
             "runs": len(runs), "max_views": views, "mean_coverage": float(np.mean(cov)),
             "max_coverage": float(np.max(cov)), "collision_rate": collisions / max(1, trajectories),
             "runs_with_collision": float(np.mean([r["collided"] for r in runs])), "trajectories": trajectories,
@@ -238,6 +242,7 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
             "median_ess": float(np.median(ess)) if ess else None,
             "plan_success_rate": float(np.mean([r["plan_success_rate"] for r in runs])),
             "seconds_per_run": float(np.mean([r["seconds"] for r in runs])),
+            "median_s_per_view": float(np.median([t for r in runs for t in r.get("seconds_per_view", [])] or [np.nan])),
             "travelled_m_per_run": float(np.mean([r["travelled_m"] for r in runs])),
         })
     return rows
@@ -255,16 +260,16 @@ def print_tables(rows: list[dict[str, Any]]) -> None:
                   f"{r['collision_rate']:10.0%}")
     nbvs = [r for r in rows if r["part"] == "nbvs"]
     if nbvs:
-        print(f"\nVasquez-Gomez Table 5 ({nbvs[0]['world']}: bunny on a table among furniture, mobile "
-              f"manipulator, sigma_v 1.65 mm/s, sigma_w 0.28 rad/s)")
+        print(f"\nVasquez-Gomez Table 5 ({nbvs[0]['world']}, mobile manipulator, sigma_v 1.65 mm/s, "
+              f"sigma_w 0.28 rad/s)")
         print("approach    k  runs  mean cov  max cov  collision rate  runs w/ collision  mean views  median ESS  "
-              "s/run")
+              "s/run  s/view")
         for r in nbvs:
             k = "-" if r["k"] is None else str(r["k"])
             ess = "-" if r["median_ess"] is None else f"{r['median_ess']:.1f}"
             print(f"{r['approach']:8s} {k:>4s} {r['runs']:5d} {r['mean_coverage']:9.1%} {r['max_coverage']:8.1%} "
                   f"{r['collision_rate']:15.0%} {r['runs_with_collision']:18.0%} {r['mean_views']:11.1f} "
-                  f"{ess:>11s} {r['seconds_per_run']:6.0f}")
+                  f"{ess:>11s} {r['seconds_per_run']:6.0f} {r['median_s_per_view']:7.1f}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -280,6 +285,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--views", type=int, default=None, help="planned views per NBVS run (12, as the paper)")
     parser.add_argument("--approaches", default="", help="subset of DU,DU-MU,EU-MU")
     parser.add_argument("--runs-file", default=None, help="JSON lines of finished NBVS runs (resume)")
+    parser.add_argument("--nbvs-world", default=NBVS_WORLD, help="world of the NBVS runs (cluttered)")
+    parser.add_argument("--open-loop", action="store_true",
+                        help="NBVS motions executed open loop, as in the paper (default: re-localising)")
+    parser.add_argument("--weighting", choices=("mean", "probability"), default="mean", help="EU weights")
     args = parser.parse_args(argv)
     worlds = tuple(w for w in args.worlds.split(",") if w)
     if set(worlds) - set(WORLDS):
@@ -302,7 +311,8 @@ def main(argv: list[str] | None = None) -> int:
 
         with work_clock():  # the runs' limits in work done: the same seed gives the same row under any load
             rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,
-                              args.runs_file, tuple(a for a in args.approaches.split(",") if a))
+                              args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
+                              {"relocalise": not args.open_loop, "weighting": args.weighting})
     if args.json:
         print(json.dumps(rows, indent=1))
     else:

@@ -170,8 +170,12 @@ class TreeNBVS:
             },
             "ess_per_move": summary["ess"],
             "stages_per_move": summary["stages"],
+            "relocalise": s.relocalise,
+            "leg_length": s.leg_length if s.relocalise else None,
             "selection_s_mean": float(np.mean(self.selection_s)) if self.selection_s else None,
+            "selection_s_median": float(np.median(self.selection_s)) if self.selection_s else None,
             "selection_s_per_scan": self.selection_s,
+            "stage_s_per_move": [{k: round(float(v), 3) for k, v in r.seconds.items()} for r in moves],
             "stop_reason": s.reason or s.status,
             "objects": [{"name": b.name, "coverage": coverage[-1] if coverage else None,
                          "result": object_result(coverage[-1] if coverage else None)}
@@ -201,8 +205,12 @@ class StartNBVS(ExploreBehaviour):
         Param("stop_on_collision", bool, True, "", "a collision ends the run (the paper's runs do)"),
         Param("planner_time_limit", float, 3.0, "s", "time limit of each planning query", low=0.01),
         Param("beam_stride", int, 8, "", "every n-th camera beam is simulated for visibility", low=1),
-        Param("weighting", str, "probability", "", "EU weights: Algorithm 1 (probability) or the sample mean",
-              choices=("probability", "mean")),
+        Param("weighting", str, "mean", "", "EU weights: the sample mean, or Algorithm 1's probability weights "
+              "(which count each sample's probability twice)", choices=("mean", "probability")),
+        Param("relocalise", bool, True, "", "execute and roll out each motion re-localising at its waypoints and "
+              "steering back onto it (false: open loop, as in the paper)"),
+        Param("leg_length", float, 0.25, "m", "with relocalise, a drive is also re-aimed every this many metres "
+              "(0: only at the waypoints)", low=0.0),
     )
 
     def work(self) -> Outcome:
@@ -226,7 +234,7 @@ class StartNBVS(ExploreBehaviour):
             planner=config.planner,
             planner_params={"time_limit": self.p["planner_time_limit"], **config.scoped("planner")},
             utility_params={} if expected or utility == AreaFactor.name else params,
-            weighting=self.p["weighting"],
+            weighting=self.p["weighting"], relocalise=self.p["relocalise"], leg_length=self.p["leg_length"],
         )
         session.progress = ctx.progress
         adapter = TreeNBVS(session, name)

@@ -14,7 +14,6 @@ from explore.nbv import (
     ObstacleField,
     StateSamples,
     expected_utility,
-    rollout_batch,
     samples_needed,
 )
 
@@ -41,18 +40,6 @@ def test_samples_needed_matches_the_paper() -> None:
     assert samples_needed(0.01, 2.0, 0.6) == 1  # eta gamma >= 1: one sample always hits
     with pytest.raises(ValueError):
         samples_needed(0.01, 1.0, 0.0)
-
-
-def test_batch_rollout_matches_the_robot(cluttered) -> None:
-    robot = cluttered.robot
-    path = _drive_past_chair(robot, 0.3)
-    controls, nominal = robot.controls_from_path(path)
-    batch = rollout_batch(robot, path[0], controls, np.zeros((2, len(controls), 2 + 7)))
-    assert np.allclose(batch[0], nominal) and np.allclose(batch[1], nominal)
-    eps = np.zeros((1, len(controls), 9))
-    eps[0, :, 1] = 0.1  # a constant angular velocity error bends the drive
-    bent = rollout_batch(robot, path[0], controls, eps)[0, -1]
-    assert abs(bent[2] - nominal[-1, 2] - 0.1 * robot.dt * len(controls)) < 1e-9
 
 
 def test_expected_utility_rejects_a_candidate_whose_noisy_reach_hits_an_obstacle(cluttered) -> None:
@@ -86,12 +73,15 @@ def test_expected_utility_weights_by_probability(cluttered) -> None:
     def utility(samples: StateSamples) -> np.ndarray:
         return samples.configs[:, 1]  # final y: varies with the noise
 
-    eu = expected_utility(None, utility, robot, plan, np.random.default_rng(1), k=50, obstacles=field)
+    eu = expected_utility(None, utility, robot, plan, np.random.default_rng(1), k=50, obstacles=field,
+                          weighting="probability")
     assert eu.feasible
     assert eu.value == pytest.approx(float(np.sum(eu.utilities * eu.weights)))
     assert np.ptp(eu.utilities) > 0  # the samples really differ
-    again = expected_utility(None, utility, robot, plan, np.random.default_rng(1), k=50, obstacles=field)
+    again = expected_utility(None, utility, robot, plan, np.random.default_rng(1), k=50, obstacles=field,
+                             weighting="probability")
     assert again.value == eu.value  # deterministic for a seed
+
 
 
 def test_filter_pipeline_counts_are_monotone(open_world, registry) -> None:
@@ -147,7 +137,7 @@ def test_log_probability_is_the_truncated_normal_density() -> None:
 
 
 def test_expected_utility_weights_and_effective_sample_size(cluttered) -> None:
-    """Algorithm 1's weights are eta P_i (ESS below k); ``mean`` weights give ESS = k."""
+    """Algorithm 1's weights are eta P_i (ESS below k); the default ``mean`` weights give ESS = k."""
     robot = cluttered.robot
     plan = MotionPlan(_drive_past_chair(robot, 1.0))
     field = ObstacleField.from_sim(cluttered)
@@ -155,9 +145,9 @@ def test_expected_utility_weights_and_effective_sample_size(cluttered) -> None:
     def utility(samples: StateSamples) -> np.ndarray:
         return samples.configs[:, 1]
 
-    paper = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field)
-    flat = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field,
-                            weighting="mean")
+    paper = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field,
+                             weighting="probability")
+    flat = expected_utility(None, utility, robot, plan, np.random.default_rng(2), k=40, obstacles=field)
     assert flat.ess == pytest.approx(40.0) and flat.value == pytest.approx(float(flat.utilities.mean()))
     assert 1.0 <= paper.ess < 40.0
     assert paper.ess == pytest.approx(1.0 / np.sum(paper.weights**2))

@@ -27,7 +27,7 @@ from explore.nbv.candidates import (
     segments_hit_boxes,
     standoff_for,
 )
-from explore.nbv.expected_utility import ObstacleField, StateSamples, expected_utility, rollout_batch, samples_needed
+from explore.nbv.expected_utility import ObstacleField, StateSamples, expected_utility, samples_needed
 from explore.nbv.modelling import ModellingSession
 from explore.nbv.modelling_records import resolve_strategy
 from explore.nbv.nbvs import NBVSSession
@@ -77,7 +77,6 @@ __all__ = [
     "path_over",
     "repair",
     "resolve_strategy",
-    "rollout_batch",
     "rotation",
     "samples_needed",
     "segments_hit_boxes",

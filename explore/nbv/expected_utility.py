@@ -14,12 +14,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3
-from explore.motion import (
-    MotionPlan,
-    box_distance,
-    truncated_normal,
-    truncated_normal_logpdf,
-)
+from explore.motion import MotionPlan, box_distance, follow_plan
 
 
 # -- the bound on k (Eq. 11-18) --------------------------------------------------------------
@@ -109,42 +104,6 @@ class ObstacleField:
 
 
 # -- rollouts and Algorithm 1 ----------------------------------------------------------------
-def rollout_batch(robot: Any, start: Array, controls: np.ndarray, eps: np.ndarray) -> np.ndarray:
-    """(k, m + 1, dof) configurations of k rollouts of ``controls`` + ``eps`` (k, m, nc).
-
-    Vectorised Euler integration with the robot's drive model, identical to
-    ``robot.rollout`` for the same errors (unicycle or omnidirectional base, joints clipped).
-    """
-    controls = np.asarray(controls, dtype=float)
-    k, m = eps.shape[0], len(controls)
-    dt = float(robot.dt)
-    base = list(robot.base_dofs)
-    joints = list(robot.joint_dofs)
-    nb = int(robot.n_base_controls)
-    lower, upper = np.asarray(robot.lower)[joints], np.asarray(robot.upper)[joints]
-    configs = np.empty((k, m + 1, len(start)))
-    configs[:, 0] = start
-    for t in range(m):
-        u = controls[t][None] + eps[:, t]
-        q = configs[:, t].copy()
-        if base:
-            ix, iy, ith = base
-            th = q[:, ith]
-            c, s = np.cos(th), np.sin(th)
-            if robot.drive == "differential":
-                q[:, ix] += u[:, 0] * c * dt
-                q[:, iy] += u[:, 0] * s * dt
-                q[:, ith] += u[:, 1] * dt
-            else:
-                q[:, ix] += (c * u[:, 0] - s * u[:, 1]) * dt
-                q[:, iy] += (s * u[:, 0] + c * u[:, 1]) * dt
-                q[:, ith] += u[:, 2] * dt
-        if joints:
-            q[:, joints] = np.clip(q[:, joints] + u[:, nb:] * dt, lower, upper)
-        configs[:, t + 1] = q
-    return configs
-
-
 @dataclass
 class StateSamples:
     """Sampled final states s_i of Algorithm 1, what a utility needs to score them."""
@@ -195,22 +154,25 @@ def expected_utility(
     rng: np.random.Generator,
     k: int = 100,
     obstacles: ObstacleField | None = None,
-    weighting: str = "probability",
+    weighting: str = "mean",
+    feedback: bool = False,
+    leg_length: float = 0.0,
 ) -> ExpectedUtility:
     """Algorithm 1: expected utility of ``candidate`` reached by executing ``plan`` k times.
 
-    Every sampled rollout x_0..x_m (``rollout_batch`` with the robot's truncated noise) is
+    Every sampled execution x_0..x_m (:func:`explore.motion.follow_plan` with the robot's
+    truncated noise: open loop as in the paper, or with ``feedback`` re-localising at the
+    plan's waypoints and every ``leg_length`` m of a drive, as the robot executes it) is
     checked state by state against the planning obstacles; ANY colliding state of ANY sample
-    makes the candidate infeasible (value 0). Otherwise the utility g(s_i) of each sampled
-    final state is weighted by its probability P_i = prod_t p(eps_t) (Eq. 2-3):
-    E(G) = sum_i g_i eta P_i with eta = 1 / sum_i P_i (log-sum-exp). ``weighting="mean"``
-    gives every sample the weight 1/k instead (the plain Monte Carlo estimate of E(G): the
-    samples are already drawn from the noise model, so Algorithm 1's weights count their
-    probability twice). ``ess`` = 1 / sum w_i^2 says how many samples the estimate rests on:
-    log P_i sums m x (noisy controls) independent terms -e^2 / (2 sigma^2) - log Z, whose
-    spread grows like sqrt(m x controls / 2) (about 17 for 300 steps of 2 noisy controls),
-    so with the per-``dt`` noise of long plans the probability weights collapse onto a few
-    samples; the paper's control sequences (RRT edges) are short.
+    makes the candidate infeasible (value 0). Otherwise the utility g(s_i) of each sampled final
+    state is averaged. ``weighting="mean"`` gives every sample the weight 1/k: the plain Monte
+    Carlo estimate of E(G), since the samples are already drawn from the noise model.
+    ``weighting="probability"`` is Algorithm 1 as printed, E(G) = sum_i g_i eta P_i with
+    P_i = prod_t p(eps_t) (Eq. 2-3) and eta = 1 / sum_i P_i (log-sum-exp), which counts each
+    sample's probability twice: log P_i sums one term -e^2 / (2 sigma^2) - log Z per noisy
+    control and step, whose spread grows like sqrt(steps x controls / 2) (about 17 for 300
+    steps of 2 noisy controls), so the weights collapse onto a few samples. ``ess`` =
+    1 / sum w_i^2 says how many samples the estimate rests on.
 
     Collision test: when the noise moves only the planar base (the paper's setting, arm
     sigma 0), a sample at step t is the nominal state moved by a planar rigid motion, so no
@@ -231,15 +193,9 @@ def expected_utility(
             ObstacleField([], None)
     start, controls = plan_controls(robot, plan)
     sigma = np.asarray(robot.control_sigma(), dtype=float)
-    beta = float(robot.truncation)
-    m = len(controls)
-    eps = truncated_normal(rng, sigma, k * m, beta).reshape(k, m, len(sigma)) if m else np.zeros((k, 0, len(sigma)))
-    eps[:, :, sigma <= 0] = 0.0
-    active = np.asarray(robot.noise_mask(controls), dtype=bool)
-    eps *= active[None]  # no error on the controls of parts commanded to stand still
-    log_prob = np.array([truncated_normal_logpdf(eps[i], sigma, beta, active) for i in range(k)])
-    configs = rollout_batch(robot, start, controls, eps)
-    nominal = rollout_batch(robot, start, controls, np.zeros((1, m, len(sigma))))[0]
+    rollouts = follow_plan(robot, start, controls, rng, k, feedback, leg_length)
+    configs, nominal, log_prob = rollouts.configs, rollouts.nominal, rollouts.log_prob
+    m = configs.shape[1] - 1
     base = list(robot.base_dofs)
     joints = list(robot.joint_dofs)
     rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
@@ -252,7 +208,7 @@ def expected_utility(
                 ref[base] = 0.0
                 local_points[key] = np.ascontiguousarray(robot.link_points(ref))
             hit, n = _rigid_step_collision(configs[:, t], nominal[t], local_points[key], base, obstacles)
-        elif joints and not np.any(sigma > 0):
+        elif not np.any(sigma > 0):
             hit, n = None, 0  # noise-free: every sample is the (validated) nominal
         else:
             hit, n = None, 0

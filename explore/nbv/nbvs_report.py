@@ -92,4 +92,6 @@ class Reporting:
             "plan_success_rate": sum(ok for _, ok in self.plan_log) / max(1, len(self.plan_log)),
             "planning_s_median": float(np.median([t for t, _ in self.plan_log])) if self.plan_log else None,
             "planner": self.planner_name,
+            "seconds_per_view": [float(sum(r.seconds.values())) for r in moves],  # wall time: choose, move, scan
+            "stage_seconds": [dict(r.seconds) for r in moves],
         }

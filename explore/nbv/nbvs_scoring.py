@@ -80,7 +80,8 @@ class Scoring:
             s.deterministic = float(self.utility_at(nominal)[0])
             if self.expected:
                 s.expected = expected_utility(s, self.utility_at, robot, s.plan, self.rng_eu, self.k, self.obstacles,
-                                              weighting=self.weighting)
+                                              weighting=self.weighting, feedback=self.relocalise,
+                                              leg_length=self.leg_length)
                 s.score = s.expected.value if s.expected.feasible else 0.0
             else:
                 s.score = s.deterministic

@@ -17,7 +17,7 @@ from typing import Any
 WALL_TIME_FIELDS = frozenset({
     "t", "elapsed_s", "scene_elapsed_s", "timings_s", "planning_time_s", "planning_time_s_total", "selection_s",
     "selection_s_mean", "selection_s_per_scan", "seconds", "step_s", "integrate_s", "planning_s", "median_s",
-    "total_s", "stage_s", "stage_times_s", "wall_s",
+    "total_s", "stage_s", "stage_times_s", "wall_s", "selection_s_median", "stage_s_per_move",
 })
 TICK_FIELDS = frozenset({"tick"})
 _ABSOLUTE_PATH = re.compile(r"(?<![\w.~])/[^\s,;:'\"()]+")
