@@ -7,13 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from explore.motion import MotionPlan, MotionProblem
+from explore.motion import MotionPlan, MotionProblem, follow_plan
 from explore.nbv import (
     STAGES,
     NBVSSession,
     ObstacleField,
     StateSamples,
+    colliding_rollouts,
     expected_utility,
+    plan_controls,
     samples_needed,
 )
 
@@ -58,6 +60,16 @@ def test_expected_utility_rejects_a_candidate_whose_noisy_reach_hits_an_obstacle
     # the rejection is real: noisy executions in the true world do hit the chair
     hits = [robot.execute(plan, np.random.default_rng(s), noise=True).collisions for s in range(20)]
     assert any(any("chair_1" in e.bodies for e in events) for events in hits)
+    # the same test over every rollout: open loop about a quarter touch the chair, re-localising fewer
+    start, controls = plan_controls(robot, plan)
+    open_loop = colliding_rollouts(robot, follow_plan(robot, start, controls, np.random.default_rng(0), 100, False),
+                                   field)
+    relocalised = colliding_rollouts(robot, follow_plan(robot, start, controls, np.random.default_rng(0), 100, True,
+                                                        0.25), field)
+    assert open_loop.mean() > 0.2 and relocalised.mean() < 0.75 * open_loop.mean()
+    first = colliding_rollouts(robot, follow_plan(robot, start, controls, np.random.default_rng(0), 100, False),
+                               field, stop_at_first=True)
+    assert first.sum() == 1 and open_loop[np.flatnonzero(first)[0]]
     # far from the chair (1 m) every rollout is clear and E(G) is the utility's value
     far = expected_utility(None, _ones, robot, MotionPlan(_drive_past_chair(robot, 1.0)),
                            np.random.default_rng(0), k=100, obstacles=field)

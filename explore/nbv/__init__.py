@@ -27,7 +27,14 @@ from explore.nbv.candidates import (
     segments_hit_boxes,
     standoff_for,
 )
-from explore.nbv.expected_utility import ObstacleField, StateSamples, expected_utility, samples_needed
+from explore.nbv.expected_utility import (
+    ObstacleField,
+    StateSamples,
+    colliding_rollouts,
+    expected_utility,
+    plan_controls,
+    samples_needed,
+)
 from explore.nbv.modelling import ModellingSession
 from explore.nbv.modelling_records import resolve_strategy
 from explore.nbv.nbvs import NBVSSession
@@ -67,7 +74,9 @@ __all__ = [
     "beams_of",
     "candidate_beams",
     "clip_above",
+    "colliding_rollouts",
     "expected_utility",
+    "plan_controls",
     "footprint_width",
     "frame_from",
     "in_environment_boxes",

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3
-from explore.motion import MotionPlan, box_distance, follow_plan
+from explore.motion import MotionPlan, Rollouts, box_distance, follow_plan
 
 
 # -- the bound on k (Eq. 11-18) --------------------------------------------------------------
@@ -174,14 +174,13 @@ def expected_utility(
     steps of 2 noisy controls), so the weights collapse onto a few samples. ``ess`` =
     1 / sum w_i^2 says how many samples the estimate rests on.
 
-    Collision test: when the noise moves only the planar base (the paper's setting, arm
-    sigma 0), a sample at step t is the nominal state moved by a planar rigid motion, so no
-    robot point moves more than |dc| + R_t |dtheta| (R_t: largest horizontal distance of the
-    nominal robot points from the base axis). Samples whose bound stays below the nominal
-    clearance are safe; the others are tested exactly on the moved surface points (numba,
-    :func:`explore.motion.kernels.rigid_step_hit`; the points in the base frame are sampled
-    once per arm configuration). With joint noise every sampled state is tested on its own
-    points (slow). ``obstacles`` defaults to the known environment of ``robot.sim``.
+    Collision test (:func:`colliding_rollouts`): when the noise moves only the planar base (the
+    paper's setting, arm sigma 0), a sample at step t is the nominal state moved by a planar rigid
+    motion, so no robot point moves more than |dc| + R_t |dtheta| (R_t: largest horizontal
+    distance of the nominal robot points from the base axis). Samples whose bound stays below the
+    nominal clearance are safe; the others are tested exactly on the moved surface points (numba,
+    :func:`explore.motion.kernels.rigid_step_hit`). ``obstacles`` defaults to the known
+    environment of ``robot.sim``.
     """
     k = int(k)
     if k < 1:
@@ -192,33 +191,11 @@ def expected_utility(
         obstacles = ObstacleField.from_sim(robot.sim) if getattr(robot, "sim", None) is not None else \
             ObstacleField([], None)
     start, controls = plan_controls(robot, plan)
-    sigma = np.asarray(robot.control_sigma(), dtype=float)
     rollouts = follow_plan(robot, start, controls, rng, k, feedback, leg_length)
-    configs, nominal, log_prob = rollouts.configs, rollouts.nominal, rollouts.log_prob
-    m = configs.shape[1] - 1
-    base = list(robot.base_dofs)
-    joints = list(robot.joint_dofs)
-    rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
-    local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration
-    for t in range(m, 0, -1):  # collisions are likeliest late (largest drift, goal near the object)
-        if rigid:
-            key = nominal[t][joints].tobytes()
-            if key not in local_points:
-                ref = nominal[t].copy()
-                ref[base] = 0.0
-                local_points[key] = np.ascontiguousarray(robot.link_points(ref))
-            hit, n = _rigid_step_collision(configs[:, t], nominal[t], local_points[key], base, obstacles)
-        elif not np.any(sigma > 0):
-            hit, n = None, 0  # noise-free: every sample is the (validated) nominal
-        else:
-            hit, n = None, 0
-            for i in range(k):
-                n += 1
-                if np.any(obstacles.clearance(robot.link_points(configs[i, t])) < 0.0):
-                    hit = i
-                    break
-        if hit is not None:
-            return ExpectedUtility(0.0, False, k, hit)
+    configs, log_prob = rollouts.configs, rollouts.log_prob
+    hits = colliding_rollouts(robot, rollouts, obstacles, stop_at_first=True)
+    if hits.any():
+        return ExpectedUtility(0.0, False, k, int(np.flatnonzero(hits)[0]))
     finals = configs[:, -1]
     poses = np.array([robot.fk(q) for q in finals])
     samples = StateSamples(finals, poses, _weighted_lengths(robot, configs), log_prob)
@@ -234,6 +211,49 @@ def expected_utility(
     if hasattr(candidate, "expected"):
         candidate.expected = result
     return result
+
+
+def colliding_rollouts(robot: Any, rollouts: Rollouts, obstacles: ObstacleField,
+                       stop_at_first: bool = False) -> np.ndarray:
+    """(k,) True for each rollout with a state in the planning obstacles (latest steps first:
+    collisions are likeliest where the drift is largest and the goal near the object).
+
+    When the noise moves only the planar base, every sample at a step is the nominal robot
+    moved rigidly in the plane (:func:`_rigid_step_collision`); with joint noise each sample's
+    own points are tested (slow); without noise every sample is the validated nominal.
+    ``stop_at_first``: return as soon as one colliding rollout is found (Algorithm 1's test).
+    """
+    configs, nominal = rollouts.configs, rollouts.nominal
+    sigma = np.asarray(robot.control_sigma(), dtype=float)
+    base, joints = list(robot.base_dofs), list(robot.joint_dofs)
+    rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
+    hits = np.zeros(len(configs), dtype=bool)
+    if not np.any(sigma > 0):
+        return hits
+    local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration
+    for t in range(configs.shape[1] - 1, 0, -1):
+        alive = np.flatnonzero(~hits)
+        if rigid:
+            key = nominal[t][joints].tobytes()
+            if key not in local_points:
+                ref = nominal[t].copy()
+                ref[base] = 0.0
+                local_points[key] = np.ascontiguousarray(robot.link_points(ref))
+            while len(alive):
+                first = _rigid_step_collision(configs[alive, t], nominal[t], local_points[key], base, obstacles)[0]
+                if first is None:
+                    break
+                hits[alive[first]] = True
+                if stop_at_first:
+                    return hits
+                alive = np.delete(alive, first)
+        else:
+            for i in alive:
+                if np.any(obstacles.clearance(robot.link_points(configs[i, t])) < 0.0):
+                    hits[i] = True
+                    if stop_at_first:
+                        return hits
+    return hits
 
 
 def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, base: list[int],
