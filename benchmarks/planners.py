@@ -25,6 +25,7 @@ median effective sample size of the EU weights. Its planning limits are on the w
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import os
 import sys
@@ -202,13 +203,18 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
                 except json.JSONDecodeError:  # a line cut short by an interrupt: that run is repeated
                     continue
                 done[(run.get("world", NBVS_WORLD), run["approach"], run["k"], run["seed"], run["max_views"],
-                      run.get("relocalise", False), run.get("weighting", "probability"))] = run
-    params = {"relocalise": True, "weighting": "mean", **(session_params or {})}
+                      run.get("relocalise", False), run.get("weighting", "probability"),
+                      run.get("leg_length", 0.25 if run.get("relocalise") else 0.0))] = run
+    defaults = inspect.signature(NBVSSession).parameters
+    params = {name: defaults[name].default for name in ("relocalise", "weighting", "leg_length")}
+    params.update(session_params or {})
+    if not params["relocalise"]:
+        params["leg_length"] = 0.0
     rows = []
     for approach, expected, k, noise in configs:
         runs = []
         for seed in seed_list:
-            key = (world, approach, k, seed, views, params["relocalise"], params["weighting"])
+            key = (world, approach, k, seed, views, params["relocalise"], params["weighting"], params["leg_length"])
             if key not in done:
                 t0 = time.perf_counter()
                 with Simulation(world, registry) as sim:
@@ -289,6 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--open-loop", action="store_true",
                         help="NBVS motions executed open loop, as in the paper (default: re-localising)")
     parser.add_argument("--weighting", choices=("mean", "probability"), default="mean", help="EU weights")
+    parser.add_argument("--leg-length", type=float, default=None,
+                        help="re-localising, also re-aim drives every this many metres (default: the session's)")
     args = parser.parse_args(argv)
     worlds = tuple(w for w in args.worlds.split(",") if w)
     if set(worlds) - set(WORLDS):
@@ -312,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
         with work_clock():  # the runs' limits in work done: the same seed gives the same row under any load
             rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,
                               args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
-                              {"relocalise": not args.open_loop, "weighting": args.weighting})
+                              {"relocalise": not args.open_loop, "weighting": args.weighting,
+                               **({} if args.leg_length is None else {"leg_length": args.leg_length})})
     if args.json:
         print(json.dumps(rows, indent=1))
     else:

@@ -233,5 +233,9 @@ def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
     assert metrics["planning"]["queries"] >= 6 and metrics["planning"]["success_rate"] > 0.0
     assert metrics["path_length"] > 0.0 and metrics["path_length_m"] > 0.0
     assert len(metrics["ess_per_move"]) == metrics["trajectories"]
+    assert metrics["relocalise"] and metrics["leg_length"] == 0.25 and metrics["weighting"] == "mean"
+    stages = metrics["stage_s_per_move"]
+    assert len(stages) == metrics["trajectories"] and {"sample", "filter", "plan", "score", "execute"} <= set(stages[0])
+    assert metrics["selection_s_median"] > 0.0
     for name in ("trajectories.png", "coverage.png", "pvs.npz", "pvs.bt", "points.ply", "trace.jsonl"):
         assert (tmp_path / "run" / name).stat().st_size > 0
