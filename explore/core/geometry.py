@@ -68,8 +68,8 @@ def rotation_angle(a: Pose, b: Pose) -> float:
     return float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-def wrap_angle(angle: float) -> float:
-    """The same angle in [-pi, pi)."""
+def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
+    """The same angle in [-pi, pi) (element-wise for an array)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 

@@ -13,7 +13,9 @@ piece's nominal end:
 * a drive first turns in place to face its end point (as fast as the base turns; a step of
   zero command costs nothing) and then drives the distance to it in the nominal time; with
   ``leg_length`` > 0 a drive is cut into legs of at most that length, each re-aimed;
-* joints move to their nominal values at the piece's end.
+* joints move to their nominal values at the piece's end;
+* after a turn or a drive the robot re-localises once more and turns back to the nominal
+  heading while it is more than ``tolerance`` off (at most three corrections).
 
 Each commanded step errs by the robot's truncated Gaussian noise (a part commanded to stand
 still does not err), so errors no longer add up over the motion but only over a piece. Pieces
@@ -31,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array
+from explore.core import Array, wrap_angle
 from explore.motion.noise import STILL, truncated_normal
 
 
@@ -74,8 +76,7 @@ class _Stepper:
         self.log_prob = np.zeros(k + 1)
         self.applied: list[np.ndarray] = []
         self.commands: list[np.ndarray] = []
-        limits = np.asarray(robot.base_control_limits(), dtype=float) if self.base else np.ones(2)
-        self.speed, self.rate = float(limits[0]), float(limits[-1])
+        self.rate = float(np.asarray(robot.base_control_limits(), dtype=float)[-1]) if self.base else 1.0
         scale = math.erf(self.beta / math.sqrt(2.0))
         self._log_norm = -np.log(np.where(self.sigma > 0, self.sigma, 1.0) * math.sqrt(2.0 * math.pi)) - math.log(scale)
 
@@ -124,12 +125,12 @@ class _Stepper:
         """(k + 1, n_joints) joint velocities reaching ``target``'s joints in ``steps`` steps."""
         return (np.asarray(target)[self.joints][None] - self.q[:, self.joints]) / (steps * self.dt)
 
-    def turn_to(self, heading: np.ndarray, rate: float, tolerance: float = 0.0) -> None:
-        """Turn each copy in place to ``heading`` (k + 1,) at most at ``rate`` (those within
-        ``tolerance`` stay); the copies that finish first wait."""
-        delta = _wrap(heading - self.q[:, self.base[2]])
+    def turn_to(self, heading: np.ndarray, tolerance: float = 0.0) -> None:
+        """Turn each copy in place to ``heading`` (k + 1,) at most at the base's turn rate (those
+        within ``tolerance`` stay); the copies that finish first wait."""
+        delta = wrap_angle(heading - self.q[:, self.base[2]])
         delta[np.abs(delta) <= tolerance] = 0.0
-        need = np.ceil(np.abs(delta) / (rate * self.dt) - 1e-9).astype(int)
+        need = np.ceil(np.abs(delta) / (self.rate * self.dt) - 1e-9).astype(int)
         for t in range(int(need.max(initial=0))):
             u = np.zeros((self.k + 1, len(self.sigma)))
             turning = need > t
@@ -140,13 +141,9 @@ class _Stepper:
         """Re-localise and correct the heading until every copy is within ``tolerance``."""
         target = np.full(self.k + 1, heading)
         for _ in range(tries):
-            if np.all(np.abs(_wrap(target - self.q[:, self.base[2]])) <= tolerance):
+            if np.all(np.abs(wrap_angle(target - self.q[:, self.base[2]])) <= tolerance):
                 return
-            self.turn_to(target, self.rate, tolerance)
-
-
-def _wrap(angle: np.ndarray) -> np.ndarray:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+            self.turn_to(target, tolerance)
 
 
 def follow_plan(robot: Any, start: Array, controls: np.ndarray, rng: np.random.Generator | None, k: int = 1,
@@ -217,7 +214,7 @@ def _drive_leg(stepper: _Stepper, u: Array, target: Array, steps: int, tolerance
         backwards = bool(u[0] < 0.0)
         d = xy[None] - stepper.q[:, [ix, iy]]
         heading = np.arctan2(d[:, 1], d[:, 0]) + (math.pi if backwards else 0.0)
-        stepper.turn_to(np.where(np.hypot(d[:, 0], d[:, 1]) > 1e-9, heading, stepper.q[:, ith]), stepper.rate)
+        stepper.turn_to(np.where(np.hypot(d[:, 0], d[:, 1]) > 1e-9, heading, stepper.q[:, ith]))
         d = xy[None] - stepper.q[:, [ix, iy]]
         u_all[:, 0] = (-1.0 if backwards else 1.0) * np.hypot(d[:, 0], d[:, 1]) / (steps * stepper.dt)
         for _ in range(steps):

@@ -1,8 +1,9 @@
 """The expected utility of a view/state under positioning noise (Vasquez-Gomez et al., Algorithm 1): k noisy
-rollouts of the executed control sequence with the robot's noise model (truncated Gaussian velocity errors, Sec. A6);
-any sampled state in the obstacle region makes the candidate infeasible; else E(G) = sum_i g(s_i) eta P_i with
-P_i = prod_t p(eps_t) (Eq. 2-3, in log space, eta = 1 / sum_i P_i). samples_needed is the bound
-k >= log a / log(1 - eta gamma) (Eq. 11-18)."""
+executions of the plan with the robot's noise model (truncated Gaussian velocity errors, Sec. A6; open loop or
+re-localising, :func:`explore.motion.follow_plan`); any sampled state in the obstacle region makes the candidate
+infeasible; else E(G) is the mean of g(s_i), or Algorithm 1's sum_i g(s_i) eta P_i with P_i = prod_t p(eps_t)
+(Eq. 2-3, in log space, eta = 1 / sum_i P_i). samples_needed is the bound k >= log a / log(1 - eta gamma)
+(Eq. 11-18)."""
 
 from __future__ import annotations
 
@@ -174,12 +175,7 @@ def expected_utility(
     steps of 2 noisy controls), so the weights collapse onto a few samples. ``ess`` =
     1 / sum w_i^2 says how many samples the estimate rests on.
 
-    Collision test (:func:`colliding_rollouts`): when the noise moves only the planar base (the
-    paper's setting, arm sigma 0), a sample at step t is the nominal state moved by a planar rigid
-    motion, so no robot point moves more than |dc| + R_t |dtheta| (R_t: largest horizontal
-    distance of the nominal robot points from the base axis). Samples whose bound stays below the
-    nominal clearance are safe; the others are tested exactly on the moved surface points (numba,
-    :func:`explore.motion.kernels.rigid_step_hit`). ``obstacles`` defaults to the known
+    The collision test is :func:`colliding_rollouts`; ``obstacles`` defaults to the known
     environment of ``robot.sim``.
     """
     k = int(k)

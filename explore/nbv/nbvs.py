@@ -205,8 +205,8 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         assert done.applied is not None and done.commands is not None
         run = self.robot.execute(MotionPlan(done.configs[0], controls=done.applied[0], dt=float(self.robot.dt)),
                                  None, noise=False, world="true")
-        run.controls, run.noise = done.commands[0][: len(run.controls)], (done.applied[0] - done.commands[0])[
-            : len(run.controls)]
+        n = len(run.controls)  # fewer when a collision stopped the motion
+        run.controls, run.noise = done.commands[0][:n], (done.applied[0] - done.commands[0])[:n]
         run.log_prob = float(done.log_prob[0])
         self.executions.append(run)
         self.q = np.asarray(run.final, dtype=float).copy()
