@@ -60,7 +60,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--world", default="cluttered")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON")
     args = parser.parse_args(argv)
-    rows = [row for seed in (int(s) for s in args.seeds.split(",") if s) for row in measure(seed, args.k, args.world)]
+    try:
+        seeds = [int(s) for s in args.seeds.split(",") if s]
+    except ValueError:
+        parser.error(f"--seeds: comma-separated integers expected, got {args.seeds!r}")
+    if args.k < 1:
+        parser.error(f"--k: must be >= 1, got {args.k}")
+    try:
+        from explore.core import BadInput
+        from explore.sim import find_world
+
+        find_world(args.world)
+    except BadInput as error:
+        parser.error(f"--world: {error}")
+    rows = [row for seed in seeds for row in measure(seed, args.k, args.world)]
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0

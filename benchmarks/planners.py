@@ -305,6 +305,15 @@ def main(argv: list[str] | None = None) -> int:
         ks = tuple(int(k) for k in args.ks.split(",") if k)
     except ValueError:
         parser.error(f"--ks: comma-separated integers expected, got {args.ks!r}")
+    if args.leg_length is not None and args.leg_length < 0.0:
+        parser.error(f"--leg-length: must be >= 0, got {args.leg_length}")
+    try:
+        from explore.core import BadInput
+        from explore.sim import find_world
+
+        find_world(args.nbvs_world)
+    except BadInput as error:
+        parser.error(f"--nbvs-world: {error}")
 
     def log(line: str) -> None:
         if not args.json:
