@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, wrap_angle
-from explore.motion.noise import STILL, truncated_normal
+from explore.motion.noise import STILL, truncated_normal, truncated_normal_logpdf
 
 
 @dataclass
@@ -77,8 +77,6 @@ class _Stepper:
         self.applied: list[np.ndarray] = []
         self.commands: list[np.ndarray] = []
         self.rate = float(np.asarray(robot.base_control_limits(), dtype=float)[-1]) if self.base else 1.0
-        scale = math.erf(self.beta / math.sqrt(2.0))
-        self._log_norm = -np.log(np.where(self.sigma > 0, self.sigma, 1.0) * math.sqrt(2.0 * math.pi)) - math.log(scale)
 
     def _errors(self, u: np.ndarray) -> np.ndarray:
         """Truncated errors of the k noisy copies where their part is commanded to move."""
@@ -89,8 +87,7 @@ class _Stepper:
         moving[self.k] = False
         eps[: self.k] = truncated_normal(self.rng, self.sigma, self.k, self.beta)
         eps *= moving
-        safe = np.where(self.sigma > 0, self.sigma, 1.0)
-        self.log_prob += np.where(moving, -0.5 * (eps / safe) ** 2 + self._log_norm, 0.0).sum(axis=1)
+        self.log_prob += truncated_normal_logpdf(eps, self.sigma, self.beta, moving, per_row=True)
         return eps
 
     def integrate(self, q: np.ndarray, applied: np.ndarray) -> np.ndarray:
