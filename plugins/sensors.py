@@ -8,20 +8,43 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from explore.core import Param, Points3
-from explore.sim import NOISE_MODELS, RaySensor
+from explore.sim import (
+    NOISE_MODELS,
+    RaySensor,
+    correlated_field,
+    flying_pixels,
+    noise_sigma,
+    quantise_disparity,
+    smooth_field,
+)
 
 if TYPE_CHECKING:
     from explore.sim import Simulation
 
 
+_DEPTH_PROFILES = {
+    "ideal": {},
+    # Kinect v1-like structured light (Khoshelham & Elberink 2012; Nguyen et al. 2012)
+    "kinect": {"noise": "kinect", "disparity_step": 0.125, "projector_shadow": True, "flying_pixels": 0.5,
+               "edge_jump": 0.02, "bias_sigma": 0.5, "patch_sigma": 0.7, "patch_px": 2.0, "grazing_from_deg": 60.0,
+               "dark_level": 30.0},
+    # Kinect v2-like time of flight: every edge pixel mixes, flat noise, no projector baseline
+    "tof": {"noise": "tof", "flying_pixels": 1.0, "edge_jump": 0.02, "bias_sigma": 0.5, "grazing_from_deg": 70.0,
+            "dark_level": 50.0},
+}
+
+
 class DepthCamera(RaySensor):
-    """Pinhole depth camera (RGB-D when ``color``), noise none / Kinect sigma(d) ~ d^2 / laser Eq. 4.39;
-    optional structured-light artefacts: disparity quantisation, projector shadows, flying pixels and a
-    low-frequency bias (explore.sim.structured_light)."""
+    """Pinhole depth camera (RGB-D when ``color``), noise none / Kinect sigma(d) ~ d^2 / time of flight /
+    laser Eq. 4.39; the artefacts of real devices (explore.sim.artefacts), switched on together by a
+    ``profile``: ``kinect`` (structured light: disparity quantisation, projector shadows, flying pixels,
+    grazing and dark-surface dropouts, a per-frame bias and correlated patches) or ``tof``."""
 
     name = "depth_camera"
     geometry = "area"
     params = (
+        Param("profile", str, "ideal", "", "a device's artefacts at once (parameters given beside it win)",
+              choices=tuple(_DEPTH_PROFILES), presets=_DEPTH_PROFILES),
         Param("width", int, 320, "px", "image width", low=1, high=8192),
         Param("height", int, 240, "px", "image height", low=1, high=8192),
         Param("fov_deg", float, 58.0, "deg", "horizontal field of view", low=1.0, high=170.0),
@@ -31,10 +54,13 @@ class DepthCamera(RaySensor):
         Param("noise", str, "kinect", "", "range noise model", choices=NOISE_MODELS),
         Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0),
         Param("max_incidence_deg", float, 85.0, "deg", "no return beyond this incidence angle", low=0.0, high=90.0),
+        Param("grazing_from_deg", float, 90.0, "deg", "returns thin out (linearly in cos) from this incidence "
+              "angle to max_incidence_deg", low=0.0, high=90.0),
         Param("rate_hz", float, 30.0, "Hz", "frame rate", low=0.01),
         Param("no_return_clears", bool, True, "", "a beam without return frees the working range"),
         Param("color", bool, False, "", "add colour from pybullet's renderer"),
-        # structured light (explore.sim.structured_light); all off by default
+        Param("dark_level", float, 0.0, "", "surface grey level (0-255) x cos(incidence) below which returns "
+              "thin out in proportion (0: off)", low=0.0, high=255.0),
         Param("baseline", float, 0.075, "m", "projector to camera distance along the camera's x axis", low=1e-4),
         Param("disparity_step", float, 0.0, "px", "disparity quantisation step (Kinect: 0.125; 0: none)", low=0.0),
         Param("projector_shadow", bool, False, "", "no return where the projector does not light the surface"),
@@ -42,6 +68,9 @@ class DepthCamera(RaySensor):
               low=0.0, high=1.0),
         Param("edge_jump", float, 0.03, "m", "depth step to a neighbour that makes a discontinuity", low=1e-4),
         Param("bias_sigma", float, 0.0, "", "low-frequency per-frame depth bias, in units of sigma(d)", low=0.0),
+        Param("patch_sigma", float, 0.0, "", "correlated depth noise in patches, in units of sigma(d)", low=0.0),
+        Param("patch_px", float, 2.0, "px", "correlation length of the patches (Gaussian sigma, full-resolution "
+              "pixels)", low=0.1),
     )
 
     def __init__(self, **values: object) -> None:
@@ -49,31 +78,31 @@ class DepthCamera(RaySensor):
             setattr(self, key, value)
         if self.max_range <= self.min_range:
             raise ValueError("max_range must exceed min_range")
+        if self.grazing_from_deg > self.max_incidence_deg:
+            self.grazing_from_deg = 90.0  # no ramp: the hard cut at max_incidence_deg only
         self.clear_from_origin = True
 
     @property
     def _image_shape(self) -> tuple[int, int]:
         return len(range(0, self.height, self.subsample)), len(range(0, self.width, self.subsample))
 
-    @property
-    def casts_shadows(self) -> bool:
-        return bool(self.projector_shadow)
+    def organised_shape(self, frames: int) -> tuple[int, int, int]:
+        return (frames, *self._image_shape)
 
-    def lit(self, sim: Simulation, poses: np.ndarray, frame: np.ndarray, points: Points3) -> np.ndarray:
-        """The projector, ``baseline`` along the camera's x axis, must see the point too (nothing
-        closer on the line from the projector to it)."""
-        projector = poses[frame, :3, 3] + self.baseline * poses[frame, :3, 0]
-        towards = points - projector
-        distance = np.linalg.norm(towards, axis=1)
-        t_hit, _, _ = sim.raycaster.cast(projector, towards / distance[:, None])
-        return t_hit >= distance - max(2e-3, 1e-3 * float(np.max(distance, initial=0.0)))
+    @property
+    def shadow_offset(self) -> np.ndarray | None:
+        """The projector, ``baseline`` along the camera's x axis."""
+        return np.array([self.baseline, 0.0, 0.0]) if self.projector_shadow else None
+
+    def sigma(self, d: np.ndarray) -> np.ndarray:
+        """The total range standard deviation: white noise, bias and patches (independent)."""
+        return super().sigma(d) * np.sqrt(1.0 + self.bias_sigma**2 + self.patch_sigma**2)
 
     def measure(self, ranges: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Flying pixels on depth edges, then the range noise, a smooth per-frame bias and the
-        quantised disparity, on the organised depth image (each effect only when switched on)."""
-        from explore.sim.structured_light import flying_pixels, quantise_disparity, smooth_field
-
-        if not (self.flying_pixels > 0 or self.bias_sigma > 0 or self.disparity_step > 0):
+        """Flying pixels on depth edges, then the white range noise, a smooth per-frame bias,
+        correlated patches and the quantised disparity, on the organised depth image (each effect
+        only when switched on)."""
+        if not (self.flying_pixels > 0 or self.bias_sigma > 0 or self.patch_sigma > 0 or self.disparity_step > 0):
             return super().measure(ranges, cos_incidence, rng)
         along = self.local_directions()[:, 2]  # depth z = range * cos(angle to the optical axis)
         frames = len(ranges) // len(along)
@@ -83,9 +112,12 @@ class DepthCamera(RaySensor):
                               self.flying_pixels, rng)
             ranges = (z.reshape(frames, -1) / along).ravel()
         ranges = super().measure(ranges, cos_incidence, rng)
+        white = noise_sigma(self.noise, np.nan_to_num(ranges), self.noise_scale)
         if self.bias_sigma > 0:
-            bias = self.bias_sigma * smooth_field(*image, rng).ravel()
-            ranges = ranges + bias * self.sigma(np.nan_to_num(ranges))
+            ranges = ranges + self.bias_sigma * smooth_field(*image, rng).ravel() * white
+        if self.patch_sigma > 0:
+            length = self.patch_px / self.subsample
+            ranges = ranges + self.patch_sigma * correlated_field(image, (length, length), rng).ravel() * white
         if self.disparity_step > 0:
             z = ranges.reshape(frames, -1) * along
             z = quantise_disparity(z, float(self.intrinsics[0, 0]), self.baseline, self.disparity_step)
@@ -112,6 +144,14 @@ class DepthCamera(RaySensor):
 
     def colors(self, sim: Simulation, poses: np.ndarray) -> np.ndarray:
         """Per-beam RGB from pybullet's TinyRenderer at the same intrinsics."""
+        return self._render(sim, poses, {})
+
+    def albedo(self, sim: Simulation, poses: np.ndarray) -> np.ndarray:
+        """Per-beam grey level of the surfaces' own colour: the render lit by ambient light only."""
+        flat = {"shadow": 0, "lightAmbientCoeff": 1.0, "lightDiffuseCoeff": 0.0, "lightSpecularCoeff": 0.0}
+        return self._render(sim, poses, flat).astype(float) @ np.array([0.299, 0.587, 0.114])
+
+    def _render(self, sim: Simulation, poses: np.ndarray, lighting: dict) -> np.ndarray:
         from explore.sim import p
 
         out = []
@@ -122,19 +162,32 @@ class DepthCamera(RaySensor):
             view = p.computeViewMatrix(eye.tolist(), (eye + z).tolist(), (-y).tolist())
             proj = p.computeProjectionMatrixFOV(fov_v, self.width / self.height, 0.01, self.max_range * 2)
             _, _, rgb, _, _ = p.getCameraImage(
-                self.width, self.height, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=sim.client
+                self.width, self.height, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=sim.client,
+                **lighting,
             )
             rgb = np.reshape(rgb, (self.height, self.width, 4))[:, :, :3]
             out.append(rgb[v, u])
         return np.vstack(out).astype(np.uint8)
 
 
+_STRIPER_PROFILES = {
+    "ideal": {},
+    # a real triangulating striper: its camera beside the laser, speckle along the stripe
+    "triangulation": {"camera_shadow": True, "speckle_sigma": 1.0, "speckle_beams": 2.0, "grazing_from_deg": 60.0},
+}
+
+
 class LaserStriper(RaySensor):
-    """Line sensor (laser stripe profiler) swept along linear scan paths; triangulation semantics."""
+    """Line sensor (laser stripe profiler) swept along linear scan paths; triangulation semantics.
+    The ``triangulation`` profile adds what its camera, ``baseline`` along the sweep, makes of the
+    stripe: shadows where the camera does not see the laser, speckle along the stripe and thinning
+    returns at grazing incidence (explore.sim.artefacts)."""
 
     name = "laser_striper"
     geometry = "line"
     params = (
+        Param("profile", str, "ideal", "", "a device's artefacts at once (parameters given beside it win)",
+              choices=tuple(_STRIPER_PROFILES), presets=_STRIPER_PROFILES),
         Param("beams_per_stripe", int, 224, "", "beams per stripe", low=2),
         Param("fan_deg", float, 24.0, "deg", "fan angle of the stripe (~14 cm wide at 325 mm)", low=0.1, high=170.0),
         Param("min_range", float, 0.15, "m", "near end of the depth of field", low=0.0),
@@ -144,7 +197,15 @@ class LaserStriper(RaySensor):
         Param("noise", str, "laser_poly", "", "range noise model", choices=NOISE_MODELS),
         Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0),
         Param("max_incidence_deg", float, 80.0, "deg", "no return beyond this incidence angle", low=0.0, high=90.0),
+        Param("grazing_from_deg", float, 90.0, "deg", "returns thin out (linearly in cos) from this incidence "
+              "angle to max_incidence_deg", low=0.0, high=90.0),
         Param("no_return_clears", bool, True, "", "a beam without return frees the depth of field"),
+        Param("baseline", float, 0.08, "m", "laser to camera distance along the sweep (the sensor's y axis)",
+              low=1e-4),
+        Param("camera_shadow", bool, False, "", "no return where the camera does not see the laser line"),
+        Param("speckle_sigma", float, 0.0, "", "speckle noise along the stripe, in units of sigma(d)", low=0.0),
+        Param("speckle_beams", float, 2.0, "", "correlation length of the speckle along the stripe (beams)",
+              low=0.1),
     )
 
     def __init__(self, **values: object) -> None:
@@ -152,8 +213,31 @@ class LaserStriper(RaySensor):
             setattr(self, key, value)
         if self.max_range <= self.min_range:
             raise ValueError("max_range must exceed min_range")
+        if self.grazing_from_deg > self.max_incidence_deg:
+            self.grazing_from_deg = 90.0
         # a triangulation sensor never proves anything below its minimum range free
         self.clear_from_origin = False
+
+    @property
+    def shadow_offset(self) -> np.ndarray | None:
+        """The camera, ``baseline`` along the sweep."""
+        return np.array([0.0, self.baseline, 0.0]) if self.camera_shadow else None
+
+    def sigma(self, d: np.ndarray) -> np.ndarray:
+        """The total range standard deviation: white noise and speckle (independent)."""
+        return super().sigma(d) * np.sqrt(1.0 + self.speckle_sigma**2)
+
+    def measure(self, ranges: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The white range noise, then speckle correlated along each stripe."""
+        measured = super().measure(ranges, cos_incidence, rng)
+        if self.speckle_sigma <= 0:
+            return measured
+        white = noise_sigma(self.noise, np.nan_to_num(measured), self.noise_scale)
+        stripes = (len(measured) // self.beams_per_stripe, self.beams_per_stripe)
+        speckle = correlated_field(stripes, (0.0, self.speckle_beams), rng).ravel()
+        measured = measured + self.speckle_sigma * speckle * white
+        measured[(measured < self.min_range) | (measured > self.max_range)] = np.nan
+        return measured
 
     @property
     def stripe_width(self) -> float:

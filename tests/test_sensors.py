@@ -135,8 +135,8 @@ def _depth(scan, pose) -> np.ndarray:
 
 def test_disparity_quantisation_gives_depth_levels_spaced_as_z_squared(wall_sim, registry, rng) -> None:
     """Kinect-like 1/8 px disparity steps: every depth is f b / (k / 8), and neighbouring levels are
-    z^2 step / (f b) apart (explore.sim.structured_light)."""
-    from explore.sim.structured_light import depth_level_spacing
+    z^2 step / (f b) apart (explore.sim.artefacts)."""
+    from explore.sim.artefacts import depth_level_spacing
 
     camera = _camera(registry, noise="none", max_range=3.0, width=320, height=240, disparity_step=0.125)
     f, b = float(camera.intrinsics[0, 0]), camera.baseline
@@ -179,7 +179,7 @@ def test_projector_shadow_behind_a_step_edge_has_the_triangulated_width(step_sim
 
 
 def test_flying_pixels_appear_only_on_depth_discontinuities(step_sim, registry, rng) -> None:
-    from explore.sim.structured_light import discontinuity_mask
+    from explore.sim.artefacts import discontinuity_mask
 
     pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
     clean = _camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng)
@@ -222,13 +222,13 @@ def test_jump_edge_filter_removes_every_flying_pixel_and_little_else(step_sim, r
     flying pixels of nearly the same depth shield each other from a single-pass filter), and at
     least 95 % of the pixels away from the edge stay."""
     from explore.perception import filter_depth_scan
-    from explore.sim.structured_light import discontinuity_mask
+    from explore.sim.artefacts import discontinuity_mask
 
     pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
     camera = _camera(registry, noise="none", width=160, height=120, flying_pixels=1.0)
     scan = camera.acquire(step_sim, pose, rng)
     floating = lambda s: int(np.count_nonzero((_depth(s, pose) > 1.0 + 1e-6) & (_depth(s, pose) < 1.2 - 1e-6)))  # noqa: E731
-    clean = filter_depth_scan(scan, 120, 160)
+    clean = filter_depth_scan(scan)
     assert floating(scan) > 50 and floating(clean) <= 0.05 * floating(scan)
     exact = _camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng)
     edge = discontinuity_mask(_depth(exact, pose).reshape(1, 120, 160), 0.03)[0].ravel()
@@ -251,3 +251,184 @@ def test_median_depth_halves_the_noise_on_a_plane(wall_sim, registry, rng) -> No
     hole = z.copy()
     hole[60, 80] = np.nan
     assert np.isnan(median_depth(hole, 3)[60, 80]) and median_depth(hole, 3)[60, 81] == hole[60, 81]
+
+
+def test_a_profile_sets_its_artefacts_and_explicit_parameters_win(registry) -> None:
+    from explore.core import BadInput
+
+    ideal = _camera(registry)
+    kinect = _camera(registry, profile="kinect")
+    custom = _camera(registry, profile="kinect", flying_pixels=0.0, disparity_step="0.25 px")
+    assert (ideal.disparity_step, ideal.projector_shadow, ideal.patch_sigma) == (0.0, False, 0.0)
+    assert (kinect.disparity_step, kinect.projector_shadow, kinect.flying_pixels) == (0.125, True, 0.5)
+    assert (custom.flying_pixels, custom.disparity_step, custom.projector_shadow) == (0.0, 0.25, True)
+    assert _camera(registry, profile="tof").noise == "tof"
+    assert registry.create("sensor", "laser_striper", {"profile": "triangulation"}).camera_shadow
+    with pytest.raises(BadInput, match=r"profile: 'kinetic' is not one of \['ideal', 'kinect', 'tof'\]"):
+        _camera(registry, profile="kinetic")
+
+
+def test_returns_thin_out_linearly_in_cos_towards_grazing_incidence(wall_sim, registry) -> None:
+    """grazing_from_deg 40, max_incidence_deg 80: the fraction of returns per incidence bin follows
+    (cos t - cos 80) / (cos 40 - cos 80) within binomial error."""
+    from explore.sim import grazing_return_probability
+
+    pose = look_at([0.0, -1.0, 0.35], [0.0, 0.4, 0.0])  # incidence 50-85 deg across the image
+    exact = _camera(registry, noise="none", width=320, height=240, max_incidence_deg=80.0)
+    thin = _camera(registry, noise="none", width=320, height=240, max_incidence_deg=80.0, grazing_from_deg=40.0)
+    seen = exact.acquire(wall_sim, pose, np.random.default_rng(0)).hits
+    kept = thin.acquire(wall_sim, pose, np.random.default_rng(1)).hits
+    assert not (kept & ~seen).any()
+    cos = np.abs(exact.acquire(wall_sim, pose, np.random.default_rng(0)).directions[:, 2])
+    expected = grazing_return_probability(cos, 40.0, 80.0)
+    bins = np.digitize(np.rad2deg(np.arccos(cos)), np.arange(40.0, 81.0, 5.0))
+    checked = 0
+    for b in np.unique(bins[seen]):
+        m = seen & (bins == b)
+        if m.sum() < 200:
+            continue
+        p = expected[m].mean()
+        assert abs(kept[m].mean() - p) <= 4 * np.sqrt(p * (1 - p) / m.sum()) + 1e-3, b
+        checked += 1
+    assert checked >= 5 and expected[seen].min() < 0.3
+
+
+DARK = """
+name: dark
+environment:
+  - {name: floor, box: [4.0, 4.0, 0.02], position: [0.0, 0.0, -0.01], color: [0.5, 0.5, 0.5, 1.0]}
+  - {name: black, box: [0.3, 0.3, 0.1], position: [-0.2, 0.0, 0.05], color: [0.05, 0.05, 0.05, 1.0]}
+  - {name: grey, box: [0.3, 0.3, 0.1], position: [0.2, 0.0, 0.05], color: [0.2, 0.2, 0.2, 1.0]}
+objects: []
+region: {min: [-1, -1, 0], max: [1, 1, 1]}
+sensor: depth_camera
+"""
+
+
+def test_dark_surfaces_return_in_proportion_to_their_grey_level(open_world, registry, tmp_path) -> None:
+    """dark_level 60: a surface of grey level g seen at incidence t returns with probability
+    min(1, g cos t / 60): the black box (g = 12.75) about 21 %, the dark grey one (g = 51) 85 %, the
+    mid-grey floor (g = 127.5) always."""
+    pose = look_at([0.0, -0.2, 1.2], [0.0, 0.0, 0.0])
+    camera = _camera(registry, noise="none", width=160, height=120, dark_level=60.0)
+    with _world_from(DARK, open_world, tmp_path) as sim:
+        seen = _camera(registry, noise="none", width=160, height=120).acquire(sim, pose, np.random.default_rng(0))
+        kept = camera.acquire(sim, pose, np.random.default_rng(1)).hits
+    points = seen.points()
+    cos = np.abs(seen.directions[seen.hits, 2])
+    top = points[:, 2] > 0.1 - 1e-6
+    inner = lambda x0: top & (np.abs(points[:, 0] - x0) < 0.13) & (np.abs(points[:, 1]) < 0.13)  # noqa: E731
+    floor = (points[:, 2] < 1e-6) & (np.abs(points[:, 0]) > 0.4)
+    kept = kept[seen.hits]
+    for mask, grey in ((inner(-0.2), 0.05 * 255), (inner(0.2), 0.2 * 255), (floor, 0.5 * 255)):
+        p = np.minimum(1.0, grey * cos[mask] / 60.0)
+        n = mask.sum()
+        assert n > 300
+        assert abs(kept[mask].sum() - p.sum()) <= 4 * np.sqrt((p * (1 - p)).sum()) + 1, grey
+
+
+def test_correlated_patches_follow_the_gaussian_correlation(wall_sim, registry) -> None:
+    """patch_sigma 1, patch_px 3 on top of the white noise: residuals of pixels L apart correlate
+    by exp(-L^2 / 36) / 2, their standard deviation is sqrt(2) sigma(d), and the sensor reports
+    that total sigma to the PVS."""
+    pose = look_at([0.0, 0.0, 1.5], [0.0, 0.0, 0.0])
+    camera = _camera(registry, max_range=3.0, width=80, height=60, patch_sigma=1.0, patch_px=3.0)
+    rng = np.random.default_rng(3)
+    out = []
+    for _ in range(30):
+        scan = camera.acquire(wall_sim, pose, rng)
+        true = 1.5 / (scan.directions @ pose[:3, 2])
+        out.append(((scan.ranges - true) / sigma_kinect(true)).reshape(scan.image_shape))
+    r = np.concatenate(out)
+    for lag in (1, 3, 6):
+        rho = np.corrcoef(r[:, :, :-lag].ravel(), r[:, :, lag:].ravel())[0, 1]
+        assert rho == pytest.approx(0.5 * np.exp(-lag**2 / 36.0), abs=0.05), lag
+    assert r.std() == pytest.approx(np.sqrt(2.0), abs=0.1)
+    np.testing.assert_allclose(camera.sigma(np.array([1.5])), np.sqrt(2.0) * sigma_kinect(1.5))
+
+
+def test_time_of_flight_noise_is_nearly_flat_with_range(wall_sim, registry, rng) -> None:
+    from explore.sim import sigma_tof
+
+    assert sigma_tof(np.array([0.5, 1.0, 3.0])) * 1e3 == pytest.approx([1.325, 1.3, 2.7])
+    camera = _camera(registry, noise="tof", max_range=3.5, width=160, height=120)
+    pose = look_at([0.0, 0.0, 2.5], [0.0, 0.0, 0.0])
+    scan = camera.acquire(wall_sim, pose, rng)
+    true = 2.5 / (scan.directions @ pose[:3, 2])
+    assert scan.hits.all() and ((scan.ranges - true) / sigma_tof(true)).std() == pytest.approx(1.0, abs=0.03)
+
+
+def _striper_world(box_side: np.ndarray, open_world, folder):  # noqa: ANN001, ANN202
+    """The wall with a 5 cm high slab on the half-plane towards ``box_side`` (a horizontal unit
+    vector) from the origin."""
+    centre = 0.5 * box_side
+    size = np.abs(box_side) + np.abs(box_side[::-1])  # 1 m along box_side, 1 m across
+    box = f"  - {{name: slab, box: [{size[0]}, {size[1]}, 0.05], position: [{centre[0]}, {centre[1]}, 0.025]}}\n"
+    return _world_from(WALL.replace("objects: []", box + "objects: []"), open_world, folder)
+
+
+def test_striper_camera_shadow_behind_a_step_has_the_triangulated_width(open_world, registry, tmp_path) -> None:
+    """The striper's camera sits ``baseline`` b along the sweep. A stripe that reaches the floor a
+    distance s before a step of height h (seen from height H) is hidden from the camera by the step
+    while s < b h / H: the shadow band on the floor is that wide and lies right before the step."""
+    pose = look_at([0.0, 0.0, 0.35], [0.0, 0.0, 0.0])
+    sweep = pose[:3, 1]
+    start, end = pose.copy(), pose.copy()
+    start[:3, 3] -= 0.04 * sweep
+    end[:3, 3] += 0.01 * sweep
+    path = ScanPath(start, end, 0.01)
+    params = {"noise": "none", "speed": 0.01}
+    with _striper_world(sweep[:2], open_world, tmp_path) as sim:
+        seen = registry.create("sensor", "laser_striper", params).acquire(sim, path, np.random.default_rng(0))
+        shadowed = registry.create("sensor", "laser_striper", {**params, "camera_shadow": True}).acquire(
+            sim, path, np.random.default_rng(0))
+    lost = seen.hits & ~shadowed.hits
+    assert not (shadowed.hits & ~seen.hits).any()
+    points = seen.origins[lost] + seen.directions[lost] * seen.ranges[lost, None]
+    along = points[:, :2] @ sweep[:2]
+    width = 0.08 * 0.05 / 0.35
+    spacing = 0.01 / 25.0
+    assert len(points) > 500 and np.allclose(points[:, 2], 0.0, atol=1e-6)
+    assert -width - 1e-6 <= along.min() < -width + 2 * spacing and along.max() <= 1e-6
+    seen_floor = seen.hits & (seen.origins[:, :2] @ sweep[:2] < -width - 2 * spacing)
+    assert shadowed.hits[seen_floor].all()
+
+
+def test_striper_speckle_correlates_along_the_stripe_only(wall_sim, registry) -> None:
+    """speckle_sigma 1, speckle_beams 2: residuals of beams L apart on a stripe correlate by
+    exp(-L^2 / 16) / 2, neighbouring stripes not at all; the scan's organised image is the sweep."""
+    striper = registry.create("sensor", "laser_striper", {"speckle_sigma": 1.0, "speckle_beams": 2.0,
+                                                          "speed": 0.1})
+    start = look_at([-0.1, 0.0, 0.3], [-0.1, 0.0, 0.0])
+    end = start.copy()
+    end[:3, 3] = [0.1, 0.0, 0.3]
+    scan = striper.acquire(wall_sim, ScanPath(start, end, 0.1), np.random.default_rng(4))
+    assert scan.image_shape == (1, len(scan.sensor_poses), 224)
+    true = 0.3 / (scan.directions @ start[:3, 2])
+    r = ((scan.ranges - true) / sigma_laser_poly(true)).reshape(scan.image_shape)[0]
+    for lag in (1, 2, 4):
+        rho = np.corrcoef(r[:, :-lag].ravel(), r[:, lag:].ravel())[0, 1]
+        assert rho == pytest.approx(0.5 * np.exp(-lag**2 / 16.0), abs=0.05), lag
+    assert abs(np.corrcoef(r[:-1].ravel(), r[1:].ravel())[0, 1]) < 0.05
+    assert r.std() == pytest.approx(np.sqrt(2.0), abs=0.1)
+
+
+def test_normals_from_the_organised_image_are_exact_on_planes_and_stop_at_jumps(step_sim, registry, rng) -> None:
+    """explore.perception.organised_normals on the box on the floor seen from above: every normal
+    of the box top and of the floor is (0, 0, 1) (without noise, to 1e-5; with Kinect noise within
+    3 deg at the median), and none is given where the 5 x 5 window meets the box's edge."""
+    from explore.perception import organised_normals
+
+    pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
+    exact = _camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng)
+    normals = organised_normals(exact)
+    given = np.isfinite(normals[:, 0])
+    assert given.mean() > 0.8
+    np.testing.assert_allclose(normals[given], np.tile([0.0, 0.0, 1.0], (given.sum(), 1)), atol=1e-5)
+    points = exact.points()
+    near_edge = np.abs(np.max(np.abs(points[:, :2]), axis=1) - 0.1) < 0.01  # within 1 cm of the box's rim
+    assert not given[near_edge & (np.max(np.abs(points[:, :2]), axis=1) > 0.1 + 0.005)].any()
+    noisy = _camera(registry, width=160, height=120).acquire(step_sim, pose, rng)
+    n = organised_normals(noisy)
+    angle = np.degrees(np.arccos(np.clip(n[np.isfinite(n[:, 0]), 2], -1.0, 1.0)))
+    assert np.median(angle) < 3.0

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from explore.core.errors import BadInput, brief
@@ -50,10 +50,17 @@ class Param:
     low: float | None = None
     high: float | None = None
     length: int | None = None  # for list parameters: exact number of items
+    # for a choice parameter (a profile): the values each choice gives other parameters, under
+    # those given explicitly (``profile: kinect`` then ``noise_scale: 2`` keeps the rest of kinect)
+    presets: Mapping[str, Mapping[str, Any]] | None = field(default=None, compare=False, hash=False)
 
     def describe(self) -> str:
         unit = f" [{self.unit}]" if self.unit else ""
         choices = f" one of {list(self.choices)}" if self.choices else ""
+        if self.presets:
+            choices += " (presets: " + "; ".join(
+                f"{name}: " + ", ".join(f"{k}={v}" for k, v in values.items()) if values else f"{name}: defaults"
+                for name, values in self.presets.items()) + ")"
         return f"{self.name}: {self.type.__name__}{unit} = {self.default!r}{choices}  {self.doc}"
 
     def convert(self, value: Any, source: str, field: str) -> Any:
@@ -133,7 +140,8 @@ def _with(unit: str) -> str:
 def validate_params(
     declared: Iterable[Param], given: Mapping[str, Any] | None, source: str, prefix: str = ""
 ) -> dict[str, Any]:
-    """Merge ``given`` over the declared defaults, converting every value.
+    """Merge ``given`` over the declared defaults (and over the presets of a chosen profile),
+    converting every value.
 
     Unknown names are a :class:`BadInput` that lists the valid ones.
     """
@@ -144,6 +152,11 @@ def validate_params(
         valid = ", ".join(sorted(declared)) or "none"
         raise BadInput(source, f"{prefix}{unknown[0]}", f"unknown parameter (valid: {valid})")
     out = {name: p.default for name, p in declared.items()}
+    for name, p in declared.items():
+        if p.presets:
+            choice = p.convert(given.get(name, p.default), source, f"{prefix}{name}")
+            for key, value in p.presets.get(choice, {}).items():
+                out[key] = declared[key].convert(value, source, f"{prefix}{name}={choice}: {key}")
     for name, value in given.items():
         out[name] = declared[name].convert(value, source, f"{prefix}{name}")
     return out

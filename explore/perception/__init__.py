@@ -14,7 +14,13 @@ from explore.perception.contracts import (
     require_role,
 )
 from explore.perception.database import ObjectDatabase, default_path, object_frame
-from explore.perception.depth_filters import filter_depth_scan, jump_edges, median_depth
+from explore.perception.depth_filters import (
+    depth_image,
+    filter_depth_scan,
+    jump_edges,
+    median_depth,
+    organised_normals,
+)
 from explore.perception.fpfh import FPFHRansacRecognizer
 from explore.perception.fusion import FusedPose, fuse_poses
 from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model, accepted, rivals, surface_distances
@@ -74,11 +80,13 @@ __all__ = [
     "default_path",
     "estimate_normals",
     "euclidean_clusters",
+    "depth_image",
     "filter_depth_scan",
     "fuse_poses",
     "icp_local",
     "jump_edges",
     "median_depth",
+    "organised_normals",
     "merge_clusters",
     "model_descriptors",
     "object_frame",

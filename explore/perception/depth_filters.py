@@ -1,15 +1,19 @@
-"""Cleaning an organised depth image before it becomes points (OpenCV).
+"""Processing an organised depth image before it becomes points (OpenCV).
 
 A structured-light or time-of-flight camera returns mixed depths on discontinuities (flying
-pixels, :mod:`explore.sim.structured_light`) that land in free space between two surfaces, where
-segmentation sees spurious clusters and ICP spurious correspondences. Two classic remedies on the
-organised image:
+pixels, :mod:`explore.sim.artefacts`) that land in free space between two surfaces, where
+segmentation sees spurious clusters and ICP spurious correspondences. The classic remedies work
+on the organised image (:attr:`Scan.image_shape <explore.sim.Scan>`: one image per camera frame,
+a laser striper's sweep as one image of stripes):
 
 - the **jump-edge filter** (Fuchs & May 2008): drop a pixel whose depth differs from a 4-neighbour
   by more than ``max_ratio`` times its own depth; it removes the flying pixels (all but the few
   that sit next to another of nearly the same depth) and erodes each true edge by about one pixel;
 - an edge-preserving **median** (``cv2.medianBlur``, 3 or 5 px) against speckle, taken only over
-  pixels with a return.
+  pixels with a return;
+- **normals from the image** (as PCL's integral-image normals): the point image averaged over a
+  window (``cv2.blur``, normalised by the returns in the window), its central differences across
+  ``window // 2`` pixels crossed; no neighbour search, and no normal across a depth jump.
 """
 
 from __future__ import annotations
@@ -18,8 +22,18 @@ import dataclasses
 
 import numpy as np
 
-from explore.sim import Scan
-from explore.sim.structured_light import discontinuity_mask
+from explore.core import Points3
+from explore.sim import Scan, discontinuity_mask
+
+
+def depth_image(scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+    """The scan's depth along each frame's optical axis as organised images (images, rows, cols),
+    NaN without a return, and the cosine between each beam and its optical axis (to go back to
+    ranges: range = depth / cosine)."""
+    if scan.image_shape is None:
+        raise ValueError("the scan is not organised (beams were dropped from it)")
+    optical = np.einsum("ij,ij->i", scan.directions, scan.sensor_poses[scan.frame_of_beam][:, :3, 2])
+    return (scan.ranges * optical).reshape(scan.image_shape), optical
 
 
 def jump_edges(z: np.ndarray, max_ratio: float = 0.02) -> np.ndarray:
@@ -41,12 +55,11 @@ def median_depth(z: np.ndarray, size: int = 3) -> np.ndarray:
     return np.where(whole, blurred, z)
 
 
-def filter_depth_scan(scan: Scan, rows: int, cols: int, max_ratio: float = 0.02, median: int = 0) -> Scan:
-    """The scan without its jump-edge beams (and, with ``median``, its depth median-filtered), frame
-    by frame; ``rows`` x ``cols`` is the sensor's image. Dropped beams are removed, not turned into
-    beams without a return, which would declare the space in front of the sensor free."""
-    optical = np.einsum("ij,ij->i", scan.directions, scan.sensor_poses[scan.frame_of_beam][:, :3, 2])
-    z = (scan.ranges * optical).reshape(-1, rows, cols)
+def filter_depth_scan(scan: Scan, max_ratio: float = 0.02, median: int = 0) -> Scan:
+    """The scan without its jump-edge beams (and, with ``median``, its depth median-filtered),
+    image by image. Dropped beams are removed, not turned into beams without a return, which
+    would declare the space in front of the sensor free."""
+    z, optical = depth_image(scan)
     if median:
         z = np.array([median_depth(image, median) for image in z])
     keep = ~jump_edges(z, max_ratio).ravel()
@@ -54,5 +67,41 @@ def filter_depth_scan(scan: Scan, rows: int, cols: int, max_ratio: float = 0.02,
     return dataclasses.replace(
         scan, origins=scan.origins[keep], directions=scan.directions[keep], ranges=ranges,
         sigmas=np.where(np.isfinite(ranges), scan.sigmas[keep], np.nan), frame_of_beam=scan.frame_of_beam[keep],
-        colors=None if scan.colors is None else scan.colors[keep],
+        colors=None if scan.colors is None else scan.colors[keep], image_shape=None,
     )
+
+
+def organised_normals(scan: Scan, window: int = 5, max_ratio: float = 0.02) -> Points3:
+    """Unit normals (n_hits, 3) of the scan's returns, oriented towards the sensor, from its
+    organised image: the point image averaged over ``window`` x ``window`` returns, then the
+    cross product of its central differences ``window // 2`` pixels apart along the rows and the
+    columns. NaN where a difference would cross a depth jump (``max_ratio``, as
+    :func:`jump_edges`) or leave the returns."""
+    import cv2
+
+    z, _ = depth_image(scan)
+    images, rows, cols = z.shape
+    valid = np.isfinite(z)
+    points = np.where(valid.ravel()[:, None], scan.origins + scan.directions * np.nan_to_num(scan.ranges)[:, None],
+                      0.0).reshape(images, rows, cols, 3)
+    size = (window, window)
+    weight = np.array([cv2.blur(v.astype(np.float64), size, borderType=cv2.BORDER_CONSTANT) for v in valid])
+    mean = np.array([cv2.blur(img, size, borderType=cv2.BORDER_CONSTANT) for img in points])
+    mean = mean / np.where(weight > 0, weight, np.nan)[..., None]
+    broken = np.array([cv2.dilate(e.astype(np.uint8), np.ones(size, np.uint8)) for e in jump_edges(z, max_ratio)])
+    usable = valid & ~broken.astype(bool)
+    h = max(1, window // 2)
+    normals = np.full((images, rows, cols, 3), np.nan)
+    both = usable[:, h:-h, h:-h] & usable[:, h:-h, 2 * h:] & usable[:, h:-h, :-2 * h] \
+        & usable[:, 2 * h:, h:-h] & usable[:, :-2 * h, h:-h]
+    du = mean[:, h:-h, 2 * h:] - mean[:, h:-h, :-2 * h]
+    dv = mean[:, 2 * h:, h:-h] - mean[:, :-2 * h, h:-h]
+    n = np.cross(du, dv)
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals[:, h:-h, h:-h] = np.where(both[..., None] & (length > 0), n / length, np.nan)
+    normals = normals.reshape(-1, 3)[scan.hits]
+    towards = scan.origins[scan.hits] - scan.points()
+    flip = np.einsum("ij,ij->i", normals, towards) < 0
+    normals[flip] *= -1.0
+    return normals

@@ -4,10 +4,19 @@ the simulated range sensors.
 
 # The names other packages use (they import from the package, never from its modules).
 from explore.sim.acquire import target_for
+from explore.sim.artefacts import (
+    correlated_field,
+    dark_return_probability,
+    discontinuity_mask,
+    flying_pixels,
+    grazing_return_probability,
+    quantise_disparity,
+    smooth_field,
+)
 from explore.sim.bullet import frame_pose, p
 from explore.sim.meshes import TriMesh, box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 from explore.sim.scan import Scan, ScanPath
-from explore.sim.sensing import NOISE_MODELS, RaySensor, sigma_kinect, sigma_laser_poly
+from explore.sim.sensing import NOISE_MODELS, RaySensor, noise_sigma, sigma_kinect, sigma_laser_poly, sigma_tof
 from explore.sim.simulation import GroundTruthBody, RayCaster, Simulation
 from explore.sim.world import WorldSpec, find_world, list_worlds, load_world_spec, repo_root
 
@@ -22,6 +31,15 @@ __all__ = [
     "TriMesh",
     "WorldSpec",
     "box_mesh",
+    "correlated_field",
+    "dark_return_probability",
+    "discontinuity_mask",
+    "flying_pixels",
+    "grazing_return_probability",
+    "noise_sigma",
+    "quantise_disparity",
+    "smooth_field",
+    "sigma_tof",
     "cylinder_mesh",
     "find_world",
     "frame_pose",

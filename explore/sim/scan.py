@@ -69,6 +69,10 @@ class Scan:
     no_return_clears : bool
         True if a beam without a return proves its working range free.
     colors : (n, 3) uint8 or None
+    image_shape : (images, rows, columns) or None
+        How the beams form organised depth images (``ranges.reshape(image_shape)``): one image
+        per frame of an area sensor, a line sensor's sweep as one image of stripes; None once
+        beams are dropped.
     """
 
     origins: Points3
@@ -85,6 +89,7 @@ class Scan:
     sensor: str = ""
     colors: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    image_shape: tuple[int, int, int] | None = None
 
     def __len__(self) -> int:
         return len(self.ranges)

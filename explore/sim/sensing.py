@@ -14,17 +14,26 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from explore.core import Array, Plugin, Points3, Pose
+from explore.sim.artefacts import dark_return_probability, grazing_return_probability
 from explore.sim.scan import Scan, ScanPath
 
 if TYPE_CHECKING:
     from explore.sim.simulation import Simulation
 
-NOISE_MODELS = ("none", "kinect", "laser_poly")
+NOISE_MODELS = ("none", "kinect", "tof", "laser_poly")
 
 
 def sigma_kinect(d: Array) -> Array:
     """Depth noise of a structured-light camera, sigma = 1.425e-3 d^2 (Khoshelham 2012), m."""
     return 1.425e-3 * np.square(d)
+
+
+def sigma_tof(d: Array) -> Array:
+    """Axial noise of a time-of-flight camera (Kinect v2) facing a surface, sigma = 1.5 - 0.5 d
+    + 0.3 d^2 mm for d in m (Fankhauser et al. 2015, the frontal term): about 1.3 mm at 1 m and
+    nearly flat over the working range, where a structured-light camera's grows with d^2."""
+    d = np.asarray(d, dtype=float)
+    return (1.5 - 0.5 * d + 0.3 * np.square(d)) * 1e-3
 
 
 def sigma_laser_poly(d: Array) -> Array:
@@ -41,6 +50,8 @@ def noise_sigma(model: str, d: Array, scale: float = 1.0) -> Array:
         return np.zeros_like(d)
     if model == "kinect":
         return scale * sigma_kinect(d)
+    if model == "tof":
+        return scale * sigma_tof(d)
     if model == "laser_poly":
         return scale * sigma_laser_poly(d)
     raise ValueError(f"unknown noise model {model!r} (valid: {', '.join(NOISE_MODELS)})")
@@ -65,6 +76,8 @@ class RaySensor(Plugin, ABC):
     noise: str = "none"
     noise_scale: float = 1.0
     max_incidence_deg: float = 85.0
+    grazing_from_deg: float = 90.0  # returns thin out from this incidence angle (>= max: a hard cut)
+    dark_level: float = 0.0  # grey level of albedo x cos(incidence) below which returns thin out (0: off)
     rate_hz: float = 30.0
     clear_from_origin: bool = True
     no_return_clears: bool = True
@@ -113,16 +126,24 @@ class RaySensor(Plugin, ABC):
         return origins, directions, frame
 
     def acquire(self, sim: Simulation, target: Pose | ScanPath, rng: np.random.Generator) -> Scan:
-        """Simulate one acquisition against the ground truth of ``sim``."""
+        """Simulate one acquisition against the ground truth of ``sim``: cast every beam, drop
+        the returns the sensor would not get (working range, grazing incidence, shadows of the
+        second viewpoint, dark surfaces), then :meth:`measure` the rest."""
         poses, timestamps = self.frames(target)
         origins, directions, frame = self._world_beams(poses, self.local_directions())
         t_hit, _, normals = sim.raycaster.cast(origins, directions)
         cos_incidence = np.abs(np.einsum("ij,ij->i", normals, directions))
         grazing = cos_incidence < np.cos(np.deg2rad(self.max_incidence_deg))
         valid = np.isfinite(t_hit) & (t_hit >= self.min_range) & (t_hit <= self.max_range) & ~grazing
-        if self.casts_shadows and valid.any():
+        if self.grazing_from_deg < self.max_incidence_deg:
+            p = grazing_return_probability(cos_incidence, self.grazing_from_deg, self.max_incidence_deg)
+            valid &= rng.random(len(valid)) < p
+        if self.shadow_offset is not None and valid.any():
             points = origins[valid] + directions[valid] * t_hit[valid, None]
             valid[np.flatnonzero(valid)[~self.lit(sim, poses, frame[valid], points)]] = False
+        if self.dark_level > 0 and (albedo := self.albedo(sim, poses)) is not None:
+            p = dark_return_probability(albedo * cos_incidence, self.dark_level)
+            valid &= rng.random(len(valid)) < p
         ranges = self.measure(np.where(valid, t_hit, np.nan), cos_incidence, rng)
         sigmas = np.where(np.isfinite(ranges), self.sigma(np.nan_to_num(ranges)), np.nan)
         return Scan(
@@ -139,29 +160,51 @@ class RaySensor(Plugin, ABC):
             no_return_clears=self.no_return_clears,
             sensor=self.name,
             colors=self.colors(sim, poses) if getattr(self, "color", False) else None,
+            image_shape=self.organised_shape(len(poses)),
         )
 
+    def organised_shape(self, frames: int) -> tuple[int, int, int]:
+        """(images, rows, columns) of the beams of ``frames`` frames: an area sensor's default is
+        one row of beams per frame; a line sensor's sweep is one image, a stripe per row."""
+        beams = len(self.local_directions())
+        return (1, frames, beams) if self.geometry == "line" else (frames, 1, beams)
+
     @property
-    def casts_shadows(self) -> bool:
-        """Whether the sensor's emitter sits beside the camera (then :meth:`lit` is asked)."""
-        return False
+    def shadow_offset(self) -> Points3 | None:
+        """Where the triangulation's second viewpoint (the projector of a structured-light camera,
+        the camera of a laser striper) sits in the sensor frame (3,), when its shadows are
+        simulated; None: an emitter at the sensor's centre, no shadows."""
+        return None
 
     def lit(self, sim: Simulation, poses: np.ndarray, frame: np.ndarray, points: Points3) -> np.ndarray:
         """Which surface ``points`` (n, 3, world; seen in frame ``frame`` (n,) of ``poses``) the
-        sensor's own emitter reaches (n,) bool: a projector or laser beside the camera casts
-        shadows the camera sees into. Default: all (an emitter at the camera's centre)."""
-        return np.ones(len(points), dtype=bool)
+        second viewpoint at :attr:`shadow_offset` sees too (n,) bool: nothing closer on the line
+        from it to the point."""
+        offset = self.shadow_offset
+        if offset is None:
+            return np.ones(len(points), dtype=bool)
+        viewpoint = poses[frame, :3, 3] + np.einsum("nij,j->ni", poses[frame, :3, :3], offset)
+        towards = points - viewpoint
+        distance = np.linalg.norm(towards, axis=1)
+        t_hit, _, _ = sim.raycaster.cast(viewpoint, towards / distance[:, None])
+        return t_hit >= distance - max(2e-3, 1e-3 * float(np.max(distance, initial=0.0)))
 
     def measure(self, ranges: Array, cos_incidence: Array, rng: np.random.Generator) -> Array:
         """Measured ranges (n,) from the true ones (NaN: no return) and |cos| of the incidence
-        angles (n,); NaN where the measurement leaves the working range. Default: Gaussian
-        noise of :meth:`sigma` (``noise`` model, ``noise_scale``)."""
+        angles (n,); NaN where the measurement leaves the working range. Default: independent
+        Gaussian noise of the ``noise`` model times ``noise_scale``."""
         if self.noise == "none":
             return ranges
-        sig = self.sigma(np.nan_to_num(ranges))
+        sig = noise_sigma(self.noise, np.nan_to_num(ranges), self.noise_scale)
         ranges = ranges + rng.normal(0.0, 1.0, size=ranges.shape) * sig
         ranges[(ranges < self.min_range) | (ranges > self.max_range)] = np.nan
         return ranges
 
     def colors(self, sim: Simulation, poses: np.ndarray) -> np.ndarray | None:
+        """Per-beam RGB (n, 3) uint8, for sensors that see colour."""
+        return None
+
+    def albedo(self, sim: Simulation, poses: np.ndarray) -> Array | None:
+        """Per-beam grey level (n,) of the surfaces' own colour (0-255, no lighting), for sensors
+        whose returns depend on it; None: not simulated."""
         return None
