@@ -42,6 +42,7 @@ Full run::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -102,19 +103,23 @@ def warm_up() -> None:
 
 def run_one(job: tuple) -> dict:
     """One modelling run; returns its metrics (plus run time)."""
-    world, strategy, seed, max_scans, overrides, fallback, threads = job
+    world, strategy, seed, max_scans, overrides, fallback, threads, profile = job
     if threads:
         import numba
 
         numba.set_num_threads(threads)
     from explore.nbv import ModellingSession
     from explore.runtime import Registry
-    from explore.sim import Simulation
+    from explore.sim import Simulation, load_world_spec
 
     registry = Registry.load()
     warm_up()
     params = {"utility_params": overrides} if overrides else {}
-    with Simulation(world, registry) as sim:
+    spec = load_world_spec(world)
+    if profile:
+        spec = dataclasses.replace(spec, sensor=dataclasses.replace(
+            spec.sensor, params={**spec.sensor.params, "profile": profile}))
+    with Simulation(spec, registry) as sim:
         session = ModellingSession(sim, (strategy, params), registry, seed=seed, max_scans=max_scans,
                                    continue_after_stop=True, fallback_generator=fallback)
         start = time.perf_counter()
@@ -272,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fallback", default="none",
                         help="view generator for runs whose strategy has no candidate left (default none); "
                              "its scans are reported in the fallback column")
+    parser.add_argument("--profile", default="", help="the sensor's profile (e.g. triangulation; default: the "
+                        "world's own)")
     parser.add_argument("--jobs", type=int, default=1, help="runs in parallel (each with one numba thread)")
     parser.add_argument("--quick", action="store_true",
                         help="bunny only, seeds 0-2, 3 strategies, 12 scans (a few minutes)")
@@ -303,7 +310,8 @@ def main(argv: list[str] | None = None) -> int:
     fallback = None if args.fallback in ("", "none") else args.fallback
     threads = 1 if args.jobs > 1 else 0
     jobs = [(world, strategy, seed, max_scans,
-             utility_overrides(registry, strategy, args.variant, args.normalise, args.hierarchy), fallback, threads)
+             utility_overrides(registry, strategy, args.variant, args.normalise, args.hierarchy), fallback, threads,
+             args.profile)
             for world in worlds for strategy in strategies for seed in seeds]
 
     def report(metrics: dict) -> None:

@@ -53,6 +53,40 @@ def _log(args: argparse.Namespace, text: str) -> None:
         print(text, flush=True)
 
 
+def _world(name: str, args: argparse.Namespace) -> Any:
+    """The world ``name`` with the sensor profile of ``--profile`` and the ``--sensor-param`` values
+    (none: the world's own)."""
+    import dataclasses
+
+    from explore.sim import load_world_spec
+
+    spec = load_world_spec(name)
+    params = dict(item.split("=", 1) for item in args.sensor_param)
+    if args.profile is not None:
+        params["profile"] = args.profile
+    if not params:
+        return spec
+    sensor = dataclasses.replace(spec.sensor, params={**spec.sensor.params, **params})
+    return dataclasses.replace(spec, sensor=sensor)
+
+
+def _processing(args: argparse.Namespace) -> dict[str, Any]:
+    """The depth processing of ``--flying-pixel-filter`` and ``--median`` as session settings (none: the
+    defaults)."""
+    pairs = (("flying_pixel_filter", args.flying_pixel_filter), ("median_px", args.median))
+    return {k: v for k, v in pairs if v is not None}
+
+
+def _filtered(scan: Any, args: argparse.Namespace) -> Any:
+    from explore.perception import filter_depth_scan
+    from explore.scene import SceneSettings
+
+    settings = SceneSettings(**_processing(args))
+    if not (settings.flying_pixel_filter > 0 or settings.median_px):
+        return scan
+    return filter_depth_scan(scan, settings.flying_pixel_filter or math.inf, settings.median_px)
+
+
 def _round(row: dict[str, Any]) -> dict[str, Any]:
     return {k: (round(v, 4) if isinstance(v, float) and math.isfinite(v) else v) for k, v in row.items()}
 
@@ -67,9 +101,9 @@ def part_scene(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
     db_path = Path(tempfile.mkdtemp(prefix="explore-scene-")) / "objects.db"
     for run, world in enumerate(("tabletop", "tabletop_rearranged")):
         started = time.perf_counter()
-        with Simulation(world, registry) as sim, ObjectDatabase.open(db_path) as db:
+        with Simulation(_world(world, args), registry) as sim, ObjectDatabase.open(db_path) as db:
             db.seed_from_world(sim)
-            session = SceneSession(sim, registry, db, seed=args.seed, run_name=f"bench{run + 1}",
+            session = SceneSession(sim, registry, db, seed=args.seed, run_name=f"bench{run + 1}", **_processing(args),
                                    progress=(lambda text: _log(args, f"    {text}")) if args.verbose else None)
             metrics = session.run()
         elapsed = time.perf_counter() - started
@@ -114,14 +148,14 @@ def part_recognition(args: argparse.Namespace, registry: Any) -> list[dict[str, 
     wrong: dict[tuple[str, str], dict[str, int]] = {}
     models_full: list[Model] = []
     for world in ("tabletop", "tabletop_rearranged"):
-        with Simulation(world, registry) as sim:
+        with Simulation(_world(world, args), registry) as sim:
             if not models_full:  # model frames of the first arrangement, as a database holds them
                 models_full = [Model(b.name, object_frame(b)[1]) for b in sim.objects()]
             bodies = {b.name: b for b in sim.objects()}
             for seed in range(args.seeds):
                 rng = np.random.default_rng(1000 + seed)
                 for eye, target in _views(rng, args.views):
-                    scan = sim.sensor.acquire(sim, look_at(eye, target), rng)
+                    scan = _filtered(sim.sensor.acquire(sim, look_at(eye, target), rng), args)
                     pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.005)
                     pvs.integrate(scan)
                     for cluster in segmenter.segment(scan).clusters:
@@ -181,10 +215,10 @@ def part_fusion(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]
 
     rows = []
     for seed in range(args.seeds):
-        with Simulation("scene_small", registry) as sim, \
+        with Simulation(_world("scene_small", args), registry) as sim, \
                 ObjectDatabase.open(Path(tempfile.mkdtemp(prefix="explore-fusion-")) / "o.db") as db:
             db.seed_from_world(sim)
-            session = SceneSession(sim, registry, db, seed=seed)
+            session = SceneSession(sim, registry, db, seed=seed, **_processing(args))
             session.viewing.overview()
             session.segment()
             session.recognition.recognise_all()
@@ -233,9 +267,9 @@ def part_pose_graph(args: argparse.Namespace, registry: Any) -> list[dict[str, A
     for world in args.graph_worlds:
         for seed in range(args.seeds):
             started = time.perf_counter()
-            with Simulation(world, registry) as sim, \
+            with Simulation(_world(world, args), registry) as sim, \
                     ObjectDatabase.open(Path(tempfile.mkdtemp(prefix="explore-graph-")) / "o.db") as db:
-                session = SceneSession(sim, registry, db, seed=seed)
+                session = SceneSession(sim, registry, db, seed=seed, **_processing(args))
                 if sim.spec.overview is not None:
                     session.viewing.overview()
                 for focus in known_tables(sim).values():  # Görner's surround step at every table
@@ -269,10 +303,10 @@ def part_robots(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]
     rows = []
     for world in ("workcell", "scene_small_mm", "scene_small_mobile"):
         started = time.perf_counter()
-        with Simulation(world, registry) as sim, \
+        with Simulation(_world(world, args), registry) as sim, \
                 ObjectDatabase.open(Path(tempfile.mkdtemp(prefix="explore-robot-")) / "o.db") as db:
             db.seed_from_world(sim)
-            session = SceneSession(sim, registry, db, seed=args.seed,
+            session = SceneSession(sim, registry, db, seed=args.seed, **_processing(args),
                                    progress=(lambda text: _log(args, f"    {text}")) if args.verbose else None)
             metrics = session.run()
         for obj in metrics["objects"]:
@@ -310,6 +344,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the scene and robot runs")
     parser.add_argument("--graph-worlds", nargs="+", default=["scene_small_mobile"],
                         help="worlds of the pose-graph part (a mobile base; two_tables takes minutes per seed)")
+    parser.add_argument("--profile", choices=("ideal", "kinect", "tof"),
+                        help="the depth camera's profile (default: each world's own)")
+    parser.add_argument("--sensor-param", action="append", default=[], metavar="KEY=VALUE",
+                        help="a sensor parameter over the profile's, e.g. flying_pixels=0 (repeatable)")
+    parser.add_argument("--flying-pixel-filter", type=float, help="drop beams with under 3 of 8 neighbours within this "
+                        "share of their depth (0: off; default: the session's)")
+    parser.add_argument("--median", type=int, choices=(0, 3, 5), help="median filter of the depth images (px)")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")
     args = parser.parse_args(argv)

@@ -140,6 +140,9 @@ class StartScene(ExploreBehaviour):
         Param("multi_view_views", int, 10, "", "view budget per ambiguous object", low=0),
         Param("register", bool, True, "", "pose graph + re-integration after each view (noisy mobile base)"),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise"),
+        Param("flying_pixel_filter", float, 0.02, "", "drop beams with under 3 of 8 neighbours within this share of "
+              "their depth (flying pixels; 0: off)", low=0.0, high=1.0),
+        Param("median_px", int, 0, "px", "median-filter each depth image first (0: off)", choices=(0, 3, 5)),
     )
 
     def work(self) -> Outcome:
@@ -162,7 +165,8 @@ class StartScene(ExploreBehaviour):
                 max_views=config.max_scans or p["max_views"], model_scans=p["model_scans"],
                 model_coverage=p["model_coverage"], retry_scans=p["retry_scans"],
                 multi_view_views=p["multi_view_views"], noise=p["noise"], planner=config.planner,
-                run_name=ctx.out_dir.name, register=p["register"],
+                run_name=ctx.out_dir.name, register=p["register"], flying_pixel_filter=p["flying_pixel_filter"],
+                median_px=p["median_px"],
             )
             session = SceneSession(ctx.sim, ctx.registry, database, settings, progress=ctx.progress)
         except BaseException:

@@ -22,15 +22,17 @@ if TYPE_CHECKING:
     from explore.sim import Simulation
 
 
+# A real device's missing return (a shadow, a dark or grazing surface) cannot be told from a beam
+# that met nothing, so the realistic profiles do not let it clear the working range.
 _DEPTH_PROFILES = {
     "ideal": {},
     # Kinect v1-like structured light (Khoshelham & Elberink 2012; Nguyen et al. 2012)
-    "kinect": {"noise": "kinect", "disparity_step": 0.125, "projector_shadow": True, "flying_pixels": 0.5,
-               "edge_jump": 0.02, "bias_sigma": 0.5, "patch_sigma": 0.7, "patch_px": 2.0, "grazing_from_deg": 60.0,
-               "dark_level": 30.0},
+    "kinect": {"noise": "kinect", "disparity_step": 0.125, "disparity_width": 640, "projector_shadow": True,
+               "flying_pixels": 0.5, "edge_jump": 0.02, "bias_sigma": 0.5, "patch_sigma": 0.7, "patch_px": 2.0,
+               "grazing_from_deg": 60.0, "dark_level": 30.0, "no_return_clears": False},
     # Kinect v2-like time of flight: every edge pixel mixes, flat noise, no projector baseline
     "tof": {"noise": "tof", "flying_pixels": 1.0, "edge_jump": 0.02, "bias_sigma": 0.5, "grazing_from_deg": 70.0,
-            "dark_level": 50.0},
+            "dark_level": 50.0, "no_return_clears": False},
 }
 
 
@@ -63,6 +65,8 @@ class DepthCamera(RaySensor):
               "thin out in proportion (0: off)", low=0.0, high=255.0),
         Param("baseline", float, 0.075, "m", "projector to camera distance along the camera's x axis", low=1e-4),
         Param("disparity_step", float, 0.0, "px", "disparity quantisation step (Kinect: 0.125; 0: none)", low=0.0),
+        Param("disparity_width", int, 0, "px", "width of the image the device matches disparities in (Kinect: 640; "
+              "0: this image's), which sets the focal length of the quantisation", low=0),
         Param("projector_shadow", bool, False, "", "no return where the projector does not light the surface"),
         Param("flying_pixels", float, 0.0, "", "probability of a mixed depth on a depth discontinuity",
               low=0.0, high=1.0),
@@ -120,10 +124,16 @@ class DepthCamera(RaySensor):
             ranges = ranges + self.patch_sigma * correlated_field(image, (length, length), rng).ravel() * white
         if self.disparity_step > 0:
             z = ranges.reshape(frames, -1) * along
-            z = quantise_disparity(z, float(self.intrinsics[0, 0]), self.baseline, self.disparity_step)
+            z = quantise_disparity(z, self.disparity_focal, self.baseline, self.disparity_step)
             ranges = (z / along).ravel()
         ranges[(ranges < self.min_range) | (ranges > self.max_range)] = np.nan
         return ranges
+
+    @property
+    def disparity_focal(self) -> float:
+        """Focal length (px) of the image the disparity is matched in: a 320-px image of a Kinect
+        is its 640-px depth image downsampled, with the 640-px image's depth levels."""
+        return float(self.intrinsics[0, 0]) * (self.disparity_width or self.width) / self.width
 
     @property
     def intrinsics(self) -> np.ndarray:
@@ -173,7 +183,8 @@ class DepthCamera(RaySensor):
 _STRIPER_PROFILES = {
     "ideal": {},
     # a real triangulating striper: its camera beside the laser, speckle along the stripe
-    "triangulation": {"camera_shadow": True, "speckle_sigma": 1.0, "speckle_beams": 2.0, "grazing_from_deg": 60.0},
+    "triangulation": {"camera_shadow": True, "speckle_sigma": 1.0, "speckle_beams": 2.0, "grazing_from_deg": 60.0,
+                      "no_return_clears": False},
 }
 
 

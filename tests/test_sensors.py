@@ -133,13 +133,17 @@ def _depth(scan, pose) -> np.ndarray:
     return scan.ranges * (scan.directions @ pose[:3, 2])
 
 
-def test_disparity_quantisation_gives_depth_levels_spaced_as_z_squared(wall_sim, registry, rng) -> None:
+@pytest.mark.parametrize("native", [0, 640])
+def test_disparity_quantisation_gives_depth_levels_spaced_as_z_squared(wall_sim, registry, rng, native) -> None:
     """Kinect-like 1/8 px disparity steps: every depth is f b / (k / 8), and neighbouring levels are
-    z^2 step / (f b) apart (explore.sim.artefacts)."""
+    z^2 step / (f b) apart (explore.sim.artefacts), f the focal length of the image the disparity is
+    matched in (``disparity_width`` 640: twice this 320-px image's, half the spacing)."""
     from explore.sim.artefacts import depth_level_spacing
 
-    camera = _camera(registry, noise="none", max_range=3.0, width=320, height=240, disparity_step=0.125)
-    f, b = float(camera.intrinsics[0, 0]), camera.baseline
+    camera = _camera(registry, noise="none", max_range=3.0, width=320, height=240, disparity_step=0.125,
+                     disparity_width=native)
+    f, b = camera.disparity_focal, camera.baseline
+    assert f == pytest.approx(float(camera.intrinsics[0, 0]) * (2.0 if native else 1.0))
     pose = look_at([0.0, -1.2, 1.0], [0.0, 0.3, 0.0])  # an oblique view: depth 1.2-2.5 m across the image
     z = _depth(camera.acquire(wall_sim, pose, rng), pose)
     exact = _depth(_camera(registry, noise="none", max_range=3.0, width=320, height=240).acquire(wall_sim, pose, rng),
@@ -216,26 +220,33 @@ def test_low_frequency_bias_correlates_neighbouring_pixels(wall_sim, registry) -
     assert biased.std() == pytest.approx(np.sqrt(2.0), abs=0.15)
 
 
-def test_jump_edge_filter_removes_every_flying_pixel_and_little_else(step_sim, registry, rng) -> None:
+def test_flying_pixel_filter_removes_the_flying_pixels_and_keeps_the_silhouettes(step_sim, registry, rng) -> None:
     """explore.perception.filter_depth_scan on the step edge with flying pixels everywhere they can be:
-    at most 5 % of the points floating between the box top and the floor remain (two neighbouring
-    flying pixels of nearly the same depth shield each other from a single-pass filter), and at
-    least 95 % of the pixels away from the edge stay."""
-    from explore.perception import filter_depth_scan
-    from explore.sim.artefacts import discontinuity_mask
+    no point stays that floats farther than 2 % of its depth (the filter's ratio) from both the box
+    top and the floor (those that stay hug a surface), at least 95 % of the pixels away from the
+    edge stay, and without flying pixels every pixel stays, the box's rim included (the jump-edge
+    filter would drop it)."""
+    from explore.perception import filter_depth_scan, jump_edges
+    from explore.sim import discontinuity_mask
 
     pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
     camera = _camera(registry, noise="none", width=160, height=120, flying_pixels=1.0)
     scan = camera.acquire(step_sim, pose, rng)
-    floating = lambda s: int(np.count_nonzero((_depth(s, pose) > 1.0 + 1e-6) & (_depth(s, pose) < 1.2 - 1e-6)))  # noqa: E731
+
+    def floating(s) -> int:  # noqa: ANN001
+        z = _depth(s, pose)
+        return int(np.count_nonzero(np.minimum(np.abs(z - 1.0), np.abs(z - 1.2)) > 0.02 * z))
+
     clean = filter_depth_scan(scan)
-    assert floating(scan) > 50 and floating(clean) <= 0.05 * floating(scan)
+    assert floating(scan) > 50 and floating(clean) == 0
     exact = _camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng)
     edge = discontinuity_mask(_depth(exact, pose).reshape(1, 120, 160), 0.03)[0].ravel()
     kept = {tuple(np.round(d, 9)) for d in clean.directions}
     kept_away = sum(tuple(np.round(d, 9)) in kept for d in scan.directions[~edge & scan.hits])
     assert kept_away >= 0.95 * np.count_nonzero(~edge & scan.hits)
     assert clean.hits.all() and len(clean.ranges) < len(scan.ranges)  # dropped, not turned into free space
+    assert len(filter_depth_scan(exact).ranges) == len(exact.ranges)
+    assert jump_edges(_depth(exact, pose).reshape(1, 120, 160)).sum() == edge.sum() > 100
 
 
 def test_median_depth_halves_the_noise_on_a_plane(wall_sim, registry, rng) -> None:

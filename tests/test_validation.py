@@ -44,7 +44,7 @@ def scene(open_world):
     """tabletop after the overview scan, integrated into a 10 mm PVS."""
     from explore.mapping import PVS
 
-    with open_world("tabletop") as sim:
+    with open_world("tabletop", profile="ideal") as sim:
         pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
         eye = np.array([0.0, -0.9, 1.35])
         pvs.integrate(sim.sensor.acquire(sim, look_at(eye, [0.0, 0.0, 0.65]), np.random.default_rng(0)))
@@ -76,3 +76,30 @@ def test_plugin(registry, scene):
     assert result.margin == pytest.approx(result.score - 0.9)
     with pytest.raises(ValueError):
         registry.plugins[("pose_validator", "pvs_votes")].create({"free_below": 0.8, "occupied_from": 0.7})
+
+
+def test_under_kinect_artefacts_the_votes_decide_wherever_the_view_saw(open_world) -> None:
+    """The same check with the world's Kinect profile and the scene exploration's flying-pixel
+    filter. A missing return clears nothing there (a projector shadow cannot be told from empty
+    space), so a pose shifted into a shadow meets unknown space, which Eq. 3.11 does not count
+    against it: every right pose is accepted, and every shifted pose is rejected unless most of
+    its vertices fall where the view gave no evidence (then q_h has to decide)."""
+    from explore.mapping import PVS
+    from explore.perception import filter_depth_scan
+
+    with open_world("tabletop") as sim:
+        pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.01)
+        eye = np.array([0.0, -0.9, 1.35])
+        pvs.integrate(filter_depth_scan(sim.sensor.acquire(sim, look_at(eye, [0.0, 0.0, 0.65]),
+                                                           np.random.default_rng(0))))
+        rejected = 0
+        for body in sim.objects():
+            vertices = body.mesh.vertices
+            toward = eye - vertices.mean(axis=0)
+            shifted = np.eye(4)
+            shifted[:3, 3] = 0.05 * toward / np.linalg.norm(toward)
+            right, wrong = pvs_votes(pvs, vertices, np.eye(4)), pvs_votes(pvs, vertices, shifted)
+            assert right.accepted, (body.name, right)
+            assert not wrong.accepted or wrong.unknown > wrong.free + wrong.occupied, (body.name, wrong)
+            rejected += not wrong.accepted
+        assert rejected >= 5

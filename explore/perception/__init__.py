@@ -17,6 +17,7 @@ from explore.perception.database import ObjectDatabase, default_path, object_fra
 from explore.perception.depth_filters import (
     depth_image,
     filter_depth_scan,
+    flying_pixel_mask,
     jump_edges,
     median_depth,
     organised_normals,
@@ -82,6 +83,7 @@ __all__ = [
     "euclidean_clusters",
     "depth_image",
     "filter_depth_scan",
+    "flying_pixel_mask",
     "fuse_poses",
     "icp_local",
     "jump_edges",

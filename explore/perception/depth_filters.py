@@ -6,9 +6,12 @@ segmentation sees spurious clusters and ICP spurious correspondences. The classi
 on the organised image (:attr:`Scan.image_shape <explore.sim.Scan>`: one image per camera frame,
 a laser striper's sweep as one image of stripes):
 
-- the **jump-edge filter** (Fuchs & May 2008): drop a pixel whose depth differs from a 4-neighbour
-  by more than ``max_ratio`` times its own depth; it removes the flying pixels (all but the few
-  that sit next to another of nearly the same depth) and erodes each true edge by about one pixel;
+- the **flying-pixel filter**: drop a pixel that fewer than ``min_support`` of its 8 neighbours
+  lie within ``max_ratio`` times its depth of. A pixel on a surface's true edge keeps the about
+  five neighbours on its own surface; a mixed pixel floating between two surfaces has none or
+  one (two neighbouring flying pixels of nearly the same depth). Unlike the jump-edge filter of
+  Fuchs & May (2008), which drops every pixel next to a jump (:func:`jump_edges`), it leaves the
+  objects' silhouettes alone, which global descriptors (VFH) and render-and-compare see;
 - an edge-preserving **median** (``cv2.medianBlur``, 3 or 5 px) against speckle, taken only over
   pixels with a return;
 - **normals from the image** (as PCL's integral-image normals): the point image averaged over a
@@ -42,6 +45,22 @@ def jump_edges(z: np.ndarray, max_ratio: float = 0.02) -> np.ndarray:
     return discontinuity_mask(z, max_ratio, relative=True, missing_is_far=False)
 
 
+def flying_pixel_mask(z: np.ndarray, max_ratio: float = 0.02, min_support: int = 3) -> np.ndarray:
+    """Pixels with a return (images along the last two axes) that fewer than ``min_support`` of
+    their 8 neighbours with a return lie within ``max_ratio`` times their depth of."""
+    far = np.where(np.isfinite(z), z, np.nan)
+    padded = np.pad(far, [(0, 0)] * (z.ndim - 2) + [(1, 1), (1, 1)], constant_values=np.nan)
+    rows, cols = z.shape[-2:]
+    support = np.zeros(z.shape, dtype=np.int8)
+    with np.errstate(invalid="ignore"):
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                if dr or dc:
+                    other = padded[..., 1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + cols]
+                    support += np.abs(other - far) <= max_ratio * far
+    return np.isfinite(z) & (support < min_support)
+
+
 def median_depth(z: np.ndarray, size: int = 3) -> np.ndarray:
     """``cv2.medianBlur`` of the depth image (size 3 or 5) where every pixel of the window has a
     return; other pixels keep their depth (a median over a hole would invent depth)."""
@@ -56,13 +75,13 @@ def median_depth(z: np.ndarray, size: int = 3) -> np.ndarray:
 
 
 def filter_depth_scan(scan: Scan, max_ratio: float = 0.02, median: int = 0) -> Scan:
-    """The scan without its jump-edge beams (and, with ``median``, its depth median-filtered),
-    image by image. Dropped beams are removed, not turned into beams without a return, which
-    would declare the space in front of the sensor free."""
+    """The scan without its flying pixels (:func:`flying_pixel_mask`; and, with ``median``, its
+    depth median-filtered), image by image. Dropped beams are removed, not turned into beams
+    without a return, which would declare the space in front of the sensor free."""
     z, optical = depth_image(scan)
     if median:
         z = np.array([median_depth(image, median) for image in z])
-    keep = ~jump_edges(z, max_ratio).ravel()
+    keep = ~flying_pixel_mask(z, max_ratio).ravel()
     ranges = (z.ravel() / optical)[keep]
     return dataclasses.replace(
         scan, origins=scan.origins[keep], directions=scan.directions[keep], ranges=ranges,

@@ -35,6 +35,9 @@ class SceneSettings:
         from the model, if at least ``split_share`` of them, are another object touching it
     register : grow a pose graph with every view when the robot has a noisy base (and correct
         the views, the clusters and the PVS with it)
+    flying_pixel_filter : drop the beams of every view that fewer than 3 of their 8 neighbours lie
+        within this share of their depth of (flying pixels between two surfaces), 0: keep every beam
+    median_px : median-filter every view's depth image over 3 or 5 pixels first (0: off)
     """
 
     segmenter: Any = None
@@ -62,3 +65,5 @@ class SceneSettings:
     split_distance: float = 0.015
     split_share: float = 0.1
     register: bool = True
+    flying_pixel_filter: float = 0.02
+    median_px: int = 0
