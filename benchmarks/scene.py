@@ -73,7 +73,8 @@ def _world(name: str, args: argparse.Namespace) -> Any:
 def _processing(args: argparse.Namespace) -> dict[str, Any]:
     """The depth processing of ``--flying-pixel-filter`` and ``--median`` as session settings (none: the
     defaults)."""
-    pairs = (("flying_pixel_filter", args.flying_pixel_filter), ("median_px", args.median))
+    pairs = (("flying_pixel_filter", args.flying_pixel_filter), ("median_px", args.median),
+             ("organised_normals", args.organised_normals))
     return {k: v for k, v in pairs if v is not None}
 
 
@@ -82,9 +83,8 @@ def _filtered(scan: Any, args: argparse.Namespace) -> Any:
     from explore.scene import SceneSettings
 
     settings = SceneSettings(**_processing(args))
-    if not (settings.flying_pixel_filter > 0 or settings.median_px):
-        return scan
-    return filter_depth_scan(scan, settings.flying_pixel_filter or math.inf, settings.median_px)
+    return filter_depth_scan(scan, settings.flying_pixel_filter or math.inf, settings.median_px,
+                             settings.organised_normals)
 
 
 def _round(row: dict[str, Any]) -> dict[str, Any]:
@@ -350,6 +350,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="a sensor parameter over the profile's, e.g. flying_pixels=0 (repeatable)")
     parser.add_argument("--flying-pixel-filter", type=float, help="drop beams with under 3 of 8 neighbours within this "
                         "share of their depth (0: off; default: the session's)")
+    parser.add_argument("--organised-normals", action=argparse.BooleanOptionalAction, default=None,
+                        help="normals from the depth images (default: the session's)")
     parser.add_argument("--median", type=int, choices=(0, 3, 5), help="median filter of the depth images (px)")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")

@@ -143,6 +143,7 @@ class StartScene(ExploreBehaviour):
         Param("flying_pixel_filter", float, 0.02, "", "drop beams with under 3 of 8 neighbours within this share of "
               "their depth (flying pixels; 0: off)", low=0.0, high=1.0),
         Param("median_px", int, 0, "px", "median-filter each depth image first (0: off)", choices=(0, 3, 5)),
+        Param("organised_normals", bool, True, "", "normals from each depth image (else a neighbour search)"),
     )
 
     def work(self) -> Outcome:
@@ -166,7 +167,7 @@ class StartScene(ExploreBehaviour):
                 model_coverage=p["model_coverage"], retry_scans=p["retry_scans"],
                 multi_view_views=p["multi_view_views"], noise=p["noise"], planner=config.planner,
                 run_name=ctx.out_dir.name, register=p["register"], flying_pixel_filter=p["flying_pixel_filter"],
-                median_px=p["median_px"],
+                median_px=p["median_px"], organised_normals=p["organised_normals"],
             )
             session = SceneSession(ctx.sim, ctx.registry, database, settings, progress=ctx.progress)
         except BaseException:

@@ -12,6 +12,7 @@ from explore.sim import (
     NOISE_MODELS,
     RaySensor,
     correlated_field,
+    depth_level_spacing,
     flying_pixels,
     noise_sigma,
     quantise_disparity,
@@ -99,8 +100,14 @@ class DepthCamera(RaySensor):
         return np.array([self.baseline, 0.0, 0.0]) if self.projector_shadow else None
 
     def sigma(self, d: np.ndarray) -> np.ndarray:
-        """The total range standard deviation: white noise, bias and patches (independent)."""
-        return super().sigma(d) * np.sqrt(1.0 + self.bias_sigma**2 + self.patch_sigma**2)
+        """The total range standard deviation: white noise, bias, patches and the rounding to the
+        quantised depth levels (uniform over a level spacing: variance spacing^2 / 12)."""
+        white = super().sigma(d) * np.sqrt(1.0 + self.bias_sigma**2 + self.patch_sigma**2)
+        if self.disparity_step <= 0:
+            return white
+        spacing = depth_level_spacing(np.asarray(d, dtype=float), self.disparity_focal, self.baseline,
+                                      self.disparity_step)
+        return np.sqrt(np.square(white) + np.square(spacing) / 12.0)
 
     def measure(self, ranges: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Flying pixels on depth edges, then the white range noise, a smooth per-frame bias,

@@ -443,3 +443,30 @@ def test_normals_from_the_organised_image_are_exact_on_planes_and_stop_at_jumps(
     n = organised_normals(noisy)
     angle = np.degrees(np.arccos(np.clip(n[np.isfinite(n[:, 0]), 2], -1.0, 1.0)))
     assert np.median(angle) < 3.0
+
+
+def test_organised_normals_travel_with_the_scan_into_the_clusters(step_sim, registry, rng) -> None:
+    """filter_depth_scan(normals=True) keeps each kept beam's organised normal; rebase_scan turns
+    the normals with the beams; the segmenter's clusters take them over the neighbour search's."""
+    from explore.perception import Cloud, filter_depth_scan, rebase_scan
+
+    pose = look_at([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
+    scan = filter_depth_scan(_camera(registry, noise="none", width=160, height=120).acquire(step_sim, pose, rng),
+                             normals=True)
+    given = np.isfinite(scan.normals[:, 0])
+    assert scan.normals.shape == (len(scan), 3) and given.mean() > 0.8
+    np.testing.assert_allclose(scan.normals[given], np.tile([0.0, 0.0, 1.0], (given.sum(), 1)), atol=1e-5)
+    turned = pose.copy()
+    turned[:3, :3] = look_at([0.0, 0.2, 1.2], [0.0, 0.0, 0.0])[:3, :3]
+    moved = rebase_scan(scan, turned)
+    delta = turned[:3, :3] @ pose[:3, :3].T
+    np.testing.assert_allclose(moved.normals[given], scan.normals[given] @ delta.T, atol=1e-9)
+    cloud = Cloud.from_scans(moved)
+    np.testing.assert_array_equal(cloud.normals, moved.normals[moved.hits])
+    clusters = registry.create("segmenter", "plane_clusters", {"scale": "table"}).cluster(
+        cloud.subset(cloud.points[:, 2] > 0.05))
+    box = max(clusters, key=lambda c: len(c.points))
+    organised = moved.normals[box.beams]
+    mine = np.isfinite(organised[:, 0])
+    assert len(box.points) > 500 and mine.mean() > 0.5
+    np.testing.assert_array_equal(box.normals[mine], organised[mine])

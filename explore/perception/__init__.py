@@ -21,6 +21,7 @@ from explore.perception.depth_filters import (
     jump_edges,
     median_depth,
     organised_normals,
+    with_organised_normals,
 )
 from explore.perception.fpfh import FPFHRansacRecognizer
 from explore.perception.fusion import FusedPose, fuse_poses
@@ -89,6 +90,7 @@ __all__ = [
     "jump_edges",
     "median_depth",
     "organised_normals",
+    "with_organised_normals",
     "merge_clusters",
     "model_descriptors",
     "object_frame",

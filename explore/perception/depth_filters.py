@@ -74,20 +74,34 @@ def median_depth(z: np.ndarray, size: int = 3) -> np.ndarray:
     return np.where(whole, blurred, z)
 
 
-def filter_depth_scan(scan: Scan, max_ratio: float = 0.02, median: int = 0) -> Scan:
+def filter_depth_scan(scan: Scan, max_ratio: float = 0.02, median: int = 0, normals: bool = False) -> Scan:
     """The scan without its flying pixels (:func:`flying_pixel_mask`; and, with ``median``, its
-    depth median-filtered), image by image. Dropped beams are removed, not turned into beams
-    without a return, which would declare the space in front of the sensor free."""
+    depth median-filtered), image by image; with ``normals`` its returns carry the normals of
+    :func:`organised_normals`, estimated before the beams go. Dropped beams are removed, not
+    turned into beams without a return, which would declare the space in front of the sensor
+    free."""
     z, optical = depth_image(scan)
     if median:
         z = np.array([median_depth(image, median) for image in z])
-    keep = ~flying_pixel_mask(z, max_ratio).ravel()
-    ranges = (z.ravel() / optical)[keep]
+        scan = dataclasses.replace(scan, ranges=z.ravel() / optical)
+    if normals:
+        scan = with_organised_normals(scan)
+    keep = ~flying_pixel_mask(z, max_ratio).ravel() if max_ratio < np.inf else np.ones(len(scan), dtype=bool)
+    ranges = scan.ranges[keep]
     return dataclasses.replace(
         scan, origins=scan.origins[keep], directions=scan.directions[keep], ranges=ranges,
         sigmas=np.where(np.isfinite(ranges), scan.sigmas[keep], np.nan), frame_of_beam=scan.frame_of_beam[keep],
         colors=None if scan.colors is None else scan.colors[keep], image_shape=None,
+        normals=None if scan.normals is None else scan.normals[keep],
     )
+
+
+def with_organised_normals(scan: Scan, window: int = 5) -> Scan:
+    """The scan with per-beam normals (:attr:`Scan.normals <explore.sim.Scan>`) from its
+    organised image (:func:`organised_normals`; NaN without a return or a usable window)."""
+    per_beam = np.full((len(scan), 3), np.nan)
+    per_beam[scan.hits] = organised_normals(scan, window)
+    return dataclasses.replace(scan, normals=per_beam)
 
 
 def organised_normals(scan: Scan, window: int = 5, max_ratio: float = 0.02) -> Points3:

@@ -185,6 +185,7 @@ def rebase_scan(scan: Scan, corrected_pose: Pose) -> Scan:
         directions=scan.directions @ r.T,
         sensor_poses=np.einsum("ij,mjk->mik", delta, scan.sensor_poses),
         meta=dict(scan.meta),
+        normals=None if scan.normals is None else scan.normals @ r.T,
     )
 
 

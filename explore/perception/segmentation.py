@@ -244,12 +244,14 @@ class Segmentation:
 
 @dataclass(frozen=True)
 class Cloud:
-    """Points from one or more scans with, per point, the sensor origin, view id and beam index."""
+    """Points from one or more scans with, per point, the sensor origin, view id and beam index, and
+    the normal the scan's depth processing gave it (NaN where none)."""
 
     points: Points3
     origins: Points3
     views: np.ndarray
     beams: np.ndarray
+    normals: Points3 | None = None
 
     @classmethod
     def from_scans(cls, scans: Scan | Sequence[Scan], view_ids: Sequence[int] | None = None) -> Cloud:
@@ -261,13 +263,16 @@ class Cloud:
         for view, scan in zip(ids, scans, strict=True):
             hit = np.flatnonzero(scan.hits)
             pts = scan.origins[hit] + scan.directions[hit] * scan.ranges[hit, None]
-            parts.append((pts, scan.origins[hit], np.full(len(hit), view, dtype=np.int64), hit.astype(np.int64)))
+            normals = scan.normals[hit] if scan.normals is not None else np.full((len(hit), 3), np.nan)
+            parts.append((pts, scan.origins[hit], np.full(len(hit), view, dtype=np.int64), hit.astype(np.int64),
+                          normals))
         if not parts:
             return cls(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
-        return cls(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+        return cls(*(np.concatenate([p[i] for p in parts]) for i in range(5)))
 
     def subset(self, mask: np.ndarray) -> Cloud:
-        return Cloud(self.points[mask], self.origins[mask], self.views[mask], self.beams[mask])
+        return Cloud(self.points[mask], self.origins[mask], self.views[mask], self.beams[mask],
+                     None if self.normals is None else self.normals[mask])
 
 
 class PlaneClusterSegmenter(Segmenter):
@@ -416,6 +421,9 @@ class PlaneClusterSegmenter(Segmenter):
         """Euclidean clusters of the object points, with oriented normals."""
         labels = euclidean_clusters(objects.points, self.cluster_tolerance, self.min_cluster_size)
         normals = estimate_normals(objects.points, max(self.normal_radius, 1e-4), objects.origins)
+        if objects.normals is not None:  # the organised image's normals where the depth processing gave them
+            given = np.isfinite(objects.normals[:, 0])
+            normals[given] = objects.normals[given]
         clusters = []
         for label in range(labels.max(initial=-1) + 1):
             mask = labels == label

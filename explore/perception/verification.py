@@ -144,6 +144,9 @@ def render_and_compare(
     within max(``threshold``, ``sigma_factor`` x the beam's sigma) of the measured range. With
     ``occlusion_aware`` a rendered beam whose measurement lies in front of the model and does
     not belong to the cluster is counted as occluded (removed from N_r) instead of as a miss.
+    A rendered beam without a return is removed from N_r too when the scan's sensor does not let
+    a missing return clear space (``no_return_clears`` false: a real camera's zero pixel, which a
+    projector shadow, a dark or a grazing surface gives as well as empty space).
     """
     lo, hi = mesh.bounds
     center = world_T_model[:3, :3] @ (0.5 * (lo + hi)) + world_T_model[:3, 3]
@@ -170,6 +173,8 @@ def render_and_compare(
         hidden = np.zeros(len(beams), dtype=bool)
         if occlusion_aware:
             hidden = ~member & np.isfinite(measured) & (measured < t_hit - tol)
+        if not scan.no_return_clears:  # a missing return says nothing (a shadow, a dark or grazing surface)
+            hidden |= ~np.isfinite(measured)
         matched += int(ok.sum())
         occluded += int(hidden.sum())
         rendered += int(len(beams) - hidden.sum())

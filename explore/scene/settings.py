@@ -38,6 +38,8 @@ class SceneSettings:
     flying_pixel_filter : drop the beams of every view that fewer than 3 of their 8 neighbours lie
         within this share of their depth of (flying pixels between two surfaces), 0: keep every beam
     median_px : median-filter every view's depth image over 3 or 5 pixels first (0: off)
+    organised_normals : give the points of an organised view the normals of its depth image
+        (:func:`~explore.perception.organised_normals`) instead of a neighbour search's
     """
 
     segmenter: Any = None
@@ -67,3 +69,4 @@ class SceneSettings:
     register: bool = True
     flying_pixel_filter: float = 0.02
     median_px: int = 0
+    organised_normals: bool = True

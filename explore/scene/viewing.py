@@ -56,8 +56,9 @@ class ViewTaking:
         start = time.perf_counter()
         scan = scene.sim.sensor.acquire(scene.sim, move.target, scene.rng_sensor)
         settings = scene.settings
-        if (settings.flying_pixel_filter > 0 or settings.median_px) and scan.image_shape is not None:
-            scan = filter_depth_scan(scan, settings.flying_pixel_filter or np.inf, settings.median_px)
+        if scan.image_shape is not None:
+            scan = filter_depth_scan(scan, settings.flying_pixel_filter or np.inf, settings.median_px,
+                                     settings.organised_normals)
         true_pose = target_start(move.target)
         if not np.allclose(move.believed, true_pose, atol=1e-9):
             scan = rebase_scan(scan, move.believed)

@@ -7,6 +7,7 @@ from explore.sim.acquire import target_for
 from explore.sim.artefacts import (
     correlated_field,
     dark_return_probability,
+    depth_level_spacing,
     discontinuity_mask,
     flying_pixels,
     grazing_return_probability,
@@ -33,6 +34,7 @@ __all__ = [
     "box_mesh",
     "correlated_field",
     "dark_return_probability",
+    "depth_level_spacing",
     "discontinuity_mask",
     "flying_pixels",
     "grazing_return_probability",

@@ -73,6 +73,9 @@ class Scan:
         How the beams form organised depth images (``ranges.reshape(image_shape)``): one image
         per frame of an area sensor, a line sensor's sweep as one image of stripes; None once
         beams are dropped.
+    normals : (n, 3) float or None
+        Surface normals of the returns (world frame, towards the sensor; NaN where none), when
+        depth processing estimated them from the organised image.
     """
 
     origins: Points3
@@ -90,6 +93,7 @@ class Scan:
     colors: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     image_shape: tuple[int, int, int] | None = None
+    normals: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ranges)
@@ -140,4 +144,6 @@ class Scan:
             self.sensor,
             None if self.colors is None else self.colors[mask],
             dict(self.meta),
+            None,
+            None if self.normals is None else self.normals[mask],
         )
