@@ -48,6 +48,7 @@ def build_grid(
     timeout: float,
     plugins: list[str],
     threads: int,
+    videos: bool = False,
 ) -> tuple[Any, Any]:
     """Validate every argument against the registry and the search paths; return (grid, registry)."""
     from explore.runtime import Grid, RunConfig, check_inputs, find_tree, load_tree, make_registry
@@ -92,7 +93,7 @@ def build_grid(
     grid = Grid(
         tree=str(tree_path.resolve()), worlds=resolved_worlds, strategies=strategy_names, planners=planner_names,
         robots=robot_names, seeds=list(range(seeds)), max_scans=max_scans,
-        settings=parsed_settings, timeout=timeout, plugins=plugin_specs, threads=threads,
+        settings=parsed_settings, timeout=timeout, plugins=plugin_specs, threads=threads, videos=videos,
     )
     return grid, registry
 
@@ -131,6 +132,8 @@ def register(app: typer.Typer) -> None:
             list[str] | None, typer.Option("--plugin", help="Extra plugin object FILE.py:OBJ or MODULE:OBJ.")
         ] = None,
         out: Annotated[Path | None, typer.Option("--out", "-o", help="Results folder (resumable).")] = None,
+        video: Annotated[bool, typer.Option("--video/--no-video", help="One video per method (its first seed's "
+                                            "run.mp4) in the report; the results are the same.")] = False,
         plot_only: Annotated[
             Path | None, typer.Option("--plot-only", help="Only redraw the report of an existing results folder.")
         ] = None,
@@ -147,7 +150,8 @@ def register(app: typer.Typer) -> None:
             console.print(f"report: {written['report.html']}", highlight=False, soft_wrap=True)
             return 0
         grid, registry = build_grid(
-            tree, worlds, strategies, planners, robots, seeds, max_scans, set_ or [], timeout, plugin or [], threads
+            tree, worlds, strategies, planners, robots, seeds, max_scans, set_ or [], timeout, plugin or [], threads,
+            video,
         )
         if out is None:
             raise BadInput("--out", None, "missing (the results folder)")

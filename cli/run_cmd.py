@@ -66,6 +66,8 @@ def register(app: typer.Typer) -> None:
         set_: Annotated[list[str] | None, typer.Option("--set", help="key=value override (repeatable).")] = None,
         out: Annotated[Path | None, typer.Option("--out", "-o", help="Run directory (default runs/...).")] = None,
         rerun: Annotated[Path | None, typer.Option("--rerun", help="Also log to a Rerun .rrd file.")] = None,
+        video: Annotated[bool, typer.Option("--video/--no-video", help="Also write run.mp4: each scan's depth image, "
+                                            "the growing model and a PVS slice.")] = False,
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view.")] = False,
         threads: Annotated[int, typer.Option("--threads", min=0, help="Threads of the numeric kernels (0: every "
                                              "core); the results are the same for any number.")] = 0,
@@ -85,7 +87,7 @@ def register(app: typer.Typer) -> None:
         config = RunConfig(
             tree=tree, world=world, strategy=strategy, planner=planner, robot=robot, sensor=sensor, seed=seed,
             max_scans=max_scans, settings=RunConfig.parse_settings(set_ or []), out=out, rerun=rerun,
-            planning_clock=planning_clock, threads=threads,
+            planning_clock=planning_clock, threads=threads, video=video,
         )
         reg = registry()
         interactive = console.is_terminal and not quiet
@@ -123,6 +125,8 @@ def register(app: typer.Typer) -> None:
         console.print(f"results: {result.out_dir}", highlight=False, soft_wrap=True)
         if rerun is not None:
             console.print(f"rerun recording: {rerun} (view with: rerun {rerun})", highlight=False, soft_wrap=True)
+        if video:
+            console.print(f"video: {result.out_dir / 'run.mp4'}", highlight=False, soft_wrap=True)
         return 0 if result.status == SUCCESS else 1
 
 

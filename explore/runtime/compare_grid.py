@@ -91,6 +91,7 @@ class RunSpec:
     timeout: float = 1800.0
     plugins: tuple[str, ...] = ()
     threads: int = 1
+    video: bool = False  # also write run.mp4 (changes no result)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -131,6 +132,7 @@ class Grid:
     timeout: float = 1800.0
     plugins: list[str] = field(default_factory=list)
     threads: int = 1
+    videos: bool = False  # one video per method: its first seed's run.mp4 (changes no result)
 
     # fields that change what a run computes: a results folder holds one value of each
     DEFINING = ("tree", "max_scans", "settings", "plugins", "threads")
@@ -152,6 +154,7 @@ class Grid:
                     robot=robot, seed=seed, out_dir=str((out / RUNS_DIR / run_id).resolve()),
                     max_scans=self.max_scans, settings=dict(self.settings), timeout=self.timeout,
                     plugins=tuple(self.plugins), threads=self.threads,
+                    video=self.videos and seed == self.seeds[0],
                 )
             )
         return specs

@@ -21,6 +21,7 @@ from explore.runtime.run_inputs import (
     RunConfig,
     jsonable,
 )
+from explore.runtime.video import RunVideo, record_scans
 from explore.runtime.worker import Worker
 from explore.sim import Simulation, load_world_spec
 
@@ -44,6 +45,7 @@ class RunContext:
         self.activity = ""  # what the running step is doing (see progress)
         self.root: Any = None  # the py_trees root once built
         self.rerun: Any = None
+        self.video: Any = None
         self.sim: Any = None
         self._trace_file = open(out_dir / "trace.jsonl", "w", encoding="utf-8")  # noqa: SIM115
         self._local = threading.local()
@@ -58,6 +60,9 @@ class RunContext:
             if config.rerun is not None:
                 self.rerun = RerunLog(config.rerun)
                 self.rerun.world(self.sim)
+            if config.video:
+                self.video = RunVideo(out_dir / "run.mp4", self)
+                record_scans(self.sim.sensor, self.video)
         except BaseException:
             self.close()
             raise
@@ -144,6 +149,8 @@ class RunContext:
             wait(pending, timeout=10.0)
         if self.rerun is not None:
             self.rerun.close()
+        if self.video is not None:
+            self.video.close()
         if not self._trace_file.closed:
             self._trace_file.close()
         if self.sim is not None:

@@ -194,7 +194,7 @@ def worker_main(argv: Sequence[str]) -> int:
         registry = make_registry(spec.plugins)
         config = RunConfig(
             tree=spec.tree, world=spec.world, strategy=spec.strategy, planner=spec.planner, robot=spec.robot,
-            seed=spec.seed, max_scans=spec.max_scans, settings=dict(spec.settings), out=spec.path,
+            seed=spec.seed, max_scans=spec.max_scans, settings=dict(spec.settings), out=spec.path, video=spec.video,
         )
         result = execute(config, registry)
     except BadInput as error:

@@ -83,9 +83,12 @@ def write_report(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
     header = f"{len(rows)} runs ({finished} finished)"
     if grid:
         header += f"; tree {Path(str(grid.get('tree'))).stem}, max scans {grid.get('max_scans') or 'tree default'}"
+    videos = run_videos(out, rows)
     md = ["# Comparison summary", "", header, ""]
     md += [t.markdown() for t in tables]
     md += [f"![{caption}]({p.name})\n" for p, caption in figures]
+    if videos:
+        md += ["## Videos", "", *[f"- [{label}]({path})" for label, path in videos], ""]
     (out / "summary.md").write_text("\n".join(md), encoding="utf-8")
     write_json_atomic(out / "summary.json", {t.key: {"title": t.title, "rows": t.values} for t in tables}, digits=None)
     body = [f"<h1>Comparison report</h1><p>{html.escape(header)}</p>"]
@@ -94,6 +97,10 @@ def write_report(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
         f"<figure><img src='{_png_data(p)}' alt='{html.escape(c)}'><figcaption>{html.escape(c)}</figcaption></figure>"
         for p, c in figures
     ]
+    if videos:
+        body.append("<h2>Videos</h2>" + "".join(
+            f"<figure><video controls width='960' src='{html.escape(path)}'></video>"
+            f"<figcaption>{html.escape(label)}</figcaption></figure>" for label, path in videos))
     page = (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>explore compare report</title>"
         f"<style>{CSS}</style></head><body>{''.join(body)}</body></html>\n"
@@ -102,6 +109,18 @@ def write_report(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
     written = {name: out / name for name in ("summary.md", "summary.json", "report.html")}
     written.update({p.name: p for p, _ in figures})
     return written
+
+
+def run_videos(out: Path, rows: Sequence[dict[str, Any]]) -> list[tuple[str, str]]:
+    """(method, path relative to ``out``) of every run that wrote a video (``explore compare
+    --video``: each method's first seed)."""
+    found = []
+    for row in rows:
+        path = out / RUNS_DIR / str(row.get("run_id")) / "run.mp4"
+        if path.is_file():
+            method = " / ".join(str(row.get(k)) for k in ("world", "strategy", "planner", "robot") if row.get(k))
+            found.append((f"{method}, seed {row.get('seed')}", path.relative_to(out).as_posix()))
+    return found
 
 
 def _find(tables: Sequence[Table], key: str) -> Table:

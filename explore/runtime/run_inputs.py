@@ -51,6 +51,7 @@ class RunConfig:
     rerun: Path | None = None  # --rerun FILE.rrd
     planning_clock: str = "work"  # motion-planning time limits in work done (deterministic) or "wall" time
     threads: int = 0  # numba / Open3D threads (0: every core); the results do not depend on it
+    video: bool = False  # --video: run.mp4, one frame per scan (explore.runtime.video)
 
     @staticmethod
     def parse_settings(items: list[str]) -> dict[str, Any]:
