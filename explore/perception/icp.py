@@ -19,14 +19,29 @@ from explore.core import (
     transform_points,
 )
 from explore.perception.arrays import as_points, as_pose
+from explore.perception.depth_filters import organised_normals
 from explore.perception.normals import estimate_normals
 from explore.sim import Scan
 
 
 def scan_points_and_normals(scan: Scan, radius: float = 0.01) -> tuple[Points3, Points3]:
-    """World points of a scan and their normals oriented towards the beam origins."""
+    """World points of a scan and their normals oriented towards the beam origins: the scan's own
+    (depth processing), else those of its organised image
+    (:func:`organised_normals`; under Kinect artefacts 4.7 deg
+    median error against 11 deg, ``benchmarks/depth_processing.py``), a neighbour search of
+    ``radius`` where neither gives one."""
     pts = scan.points()
-    return pts, estimate_normals(pts, radius, scan.origins[scan.hits])
+    if scan.normals is not None:
+        given = scan.normals[scan.hits]
+    elif scan.image_shape is not None:
+        given = organised_normals(scan)
+    else:
+        return pts, estimate_normals(pts, radius, scan.origins[scan.hits])
+    missing = ~np.isfinite(given[:, 0])
+    if missing.any():
+        given = given.copy()
+        given[missing] = estimate_normals(pts, radius, scan.origins[scan.hits])[missing]
+    return pts, given
 
 
 @dataclass(frozen=True)
