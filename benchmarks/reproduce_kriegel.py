@@ -297,6 +297,16 @@ def main(argv: list[str] | None = None) -> int:
 
     registry = Registry.load()
     worlds = [w for w in args.worlds.split(",") if w]
+    if args.profile:
+        from explore.core import BadInput
+        from explore.sim import load_world_spec
+
+        for world in worlds:
+            try:
+                sensor = load_world_spec(world).sensor
+                registry.create("sensor", sensor.plugin, {**sensor.params, "profile": args.profile}, "--profile")
+            except BadInput as error:
+                parser.error(str(error))
     seeds = parse_seeds(args.seeds)
     if args.strategies == "table4.5":
         strategies = list(TABLE_4_5)

@@ -356,10 +356,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")
     args = parser.parse_args(argv)
+    from explore.core import BadInput
     from explore.motion import work_clock
     from explore.runtime import Registry
 
+    for item in args.sensor_param:
+        if "=" not in item:
+            parser.error(f"--sensor-param: KEY=VALUE expected, got {item!r}")
     registry = Registry.load()
+    try:  # the sensor's parameters as every part's worlds will take them
+        spec = _world("tabletop", args).sensor
+        registry.create("sensor", spec.plugin, spec.params, "--sensor-param")
+    except BadInput as error:
+        parser.error(str(error))
     parts = args.part or ["scene", "recognition", "fusion", "pose_graph"]
     rows: list[dict[str, Any]] = []
     for part in parts:
