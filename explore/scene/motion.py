@@ -49,18 +49,24 @@ class Move:
 
 
 def _split_drive(robot: Any, plan: Any, base_dofs: tuple[int, ...], length: float) -> tuple[Any, Any]:
-    """(first leg, rest) of a plan at ``length`` metres of base travel; rest None when the
-    plan drives less than 1.5 x ``length`` (no short last leg)."""
+    """(first leg, rest) of a plan at the base motion time of a straight ``length`` m drive;
+    rest None when the plan moves its base for less than 1.5 legs (no short last leg).
+
+    Legs are cut by time, not distance: the base's control noise errs at every step the base
+    moves (Vasquez-Gomez Sec. A6), and a turn in place drifts the heading as a drive does.
+    """
     from explore.motion import MotionPlan
 
     if plan.controls is None:
         controls, path = robot.controls_from_path(plan.path)
         plan = MotionPlan(path, controls=controls, dt=float(robot.dt), planner=plan.planner)
-    xy = np.asarray(plan.path, dtype=float)[:, list(base_dofs[:2])]
-    travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
-    if travel[-1] < 1.5 * length:
+    base_moving = np.any(np.abs(np.asarray(plan.controls)[:, : robot.n_base_controls]) > 0.0, axis=1)
+    moved = np.cumsum(base_moving)
+    speed = float(robot.base_control_limits()[0])  # the straight drive speed (m/s)
+    leg_steps = max(1, math.ceil(length / (speed * float(robot.dt))))
+    if len(moved) == 0 or moved[-1] < 1.5 * leg_steps:
         return plan, None
-    k = int(np.searchsorted(travel, length))
+    k = int(np.searchsorted(moved, leg_steps)) + 1
     first = MotionPlan(plan.path[: k + 1], controls=plan.controls[:k], dt=plan.dt, planner=plan.planner)
     rest = MotionPlan(plan.path[k:], controls=plan.controls[k:], dt=plan.dt, planner=plan.planner)
     return first, rest
@@ -282,11 +288,22 @@ class Mover:
         return execution
 
     def _correction(self, problem: Any, nominal: Array) -> Any:
-        """A plan from the robot's configuration to ``nominal`` (None: none needed or found)."""
+        """A plan from the robot's configuration to ``nominal`` (None: none needed or found).
+
+        A correction is a short manoeuvre back onto the path: a plan whose base drives further
+        than a leg (a sampling planner's detour around the table to undo 3 cm, executed open
+        loop with the heading noise of a full turn) is not one, and the drive goes on without it.
+        """
         here = np.asarray(self.robot.q, dtype=float).copy()
-        if np.linalg.norm(here[list(self.base_dofs)] - np.asarray(nominal)[list(self.base_dofs)]) < 0.01:
+        base = list(self.base_dofs)
+        if np.linalg.norm(here[base] - np.asarray(nominal)[base]) < 0.01:
             return None
-        return self.planner.plan(problem, here, np.asarray(nominal, dtype=float), seed=int(self.rng.integers(2**31)))
+        plan = self.planner.plan(problem, here, np.asarray(nominal, dtype=float), seed=int(self.rng.integers(2**31)))
+        if plan is None:
+            return None
+        xy = np.asarray(plan.path, dtype=float)[:, base[:2]]
+        driven = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
+        return plan if driven <= float(self.robot.replan_distance) else None
 
     def _fly(self, target: Target) -> Move:
         start = target_start(target)
