@@ -29,6 +29,14 @@ same candidate.
 ``--png FILE`` draws the median c_a per scan with its inter-quartile band, one curve per
 strategy and one panel per world.
 
+``--set broad`` runs the broad object set of issue 20 instead of ``--worlds``: 17 objects
+from pybullet_data (``benchmarks/broad_set.yaml``: the thesis objects, cavities and handles,
+holes, thin and tall parts, a fixed random draw of ``random_urdfs``), each alone on the
+pedestal (``benchmarks/broad_worlds.py``), sensed by ``--sensor laser_striper`` (default) or
+``depth_camera``; ``--objects`` picks some of them. ``--missing DIR`` writes, for every run
+whose final c_a is below 99 %, a picture of the observable surface with what the model misses
+in red (``DIR/<world>_<strategy>_<seed>.png``).
+
 Quick run (a few minutes on 2 cores)::
 
     .venv/bin/python benchmarks/reproduce_kriegel.py --quick
@@ -37,6 +45,11 @@ Full run::
 
     .venv/bin/python benchmarks/reproduce_kriegel.py --worlds bunny_pedestal,duck_pedestal,teddy_pedestal \\
         --seeds 0-9 --max-scans 30 --jobs 2 --png kriegel_table45.png
+
+Broad set (issue 20)::
+
+    .venv/bin/python benchmarks/reproduce_kriegel.py --set broad --strategies ig_quality/bs_hr,ig_quality/sphere \\
+        --seeds 0 --max-scans 30 --jobs 2 --png broad.png --missing broad_missing
 """
 
 from __future__ import annotations
@@ -45,6 +58,7 @@ import argparse
 import dataclasses
 import json
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -55,7 +69,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 QUICK_STRATEGIES = ["ig_quality/bs_hr", "ig_quality/sphere", "random/bs_hr"]
 ROW_KEYS = ("strategy", "world", "median_scans", "coverage_at_termination", "coverage_at_10", "coverage_at_30",
             "path_length_m", "selection_s")
-EXTRA_KEYS = ("notch", "median_coverage_at_10", "median_coverage_at_30", "coverage_at_30_per_seed", "scans_taken",
+EXTRA_KEYS = ("notch", "estimate_at_termination", "min_coverage_last", "stop_reasons",
+              "median_coverage_at_10", "median_coverage_at_30", "coverage_at_30_per_seed", "scans_taken",
               "rms_error_mm", "chamfer_mm", "coverage_auc",
               "coverage_estimate_final", "fallback_share", "max_selection_s", "max_candidates", "seeds",
               "variant", "normalise", "hierarchy")
@@ -103,7 +118,7 @@ def warm_up() -> None:
 
 def run_one(job: tuple) -> dict:
     """One modelling run; returns its metrics (plus run time)."""
-    world, strategy, seed, max_scans, overrides, fallback, threads, profile = job
+    world, strategy, seed, max_scans, overrides, fallback, threads, profile, missing = job
     if threads:
         import numba
 
@@ -126,6 +141,15 @@ def run_one(job: tuple) -> dict:
         result = session.run()
         metrics = result.metrics
         metrics["run_s"] = time.perf_counter() - start
+        if missing and metrics["coverage"] and metrics["coverage"][-1] < 0.99:
+            from broad_worlds import missing_surface_png
+
+            gt = session.ground_truth()
+            Path(missing).mkdir(parents=True, exist_ok=True)
+            name = f"{spec.name}_{strategy.replace('/', '-')}_{seed}.png"
+            missing_surface_png(gt.observable, session.point_history[-1], gt.tau, Path(missing) / name,
+                                f"{spec.name}, {strategy}, seed {seed}, {len(metrics['coverage'])} scans "
+                                f"({metrics['reason']})")
     return metrics
 
 
@@ -143,6 +167,7 @@ def summarise(runs: list[dict], strategy: str, world: str, max_scans: int, optio
     notch = 1.57 * (q3 - q1) / np.sqrt(len(n_s))
     curves = np.array([padded(r["coverage"], max_scans) for r in runs])
     c_term = [curves[i, max(int(r["n_s"]), 1) - 1] for i, r in enumerate(runs)]
+    estimate_term = [r["coverage_estimate"][max(int(r["n_s"]), 1) - 1] for r in runs if r["coverage_estimate"]]
     sel = [t for r in runs for t in r["selection_s"]]
     cands = [c for r in runs for c in r["selection_candidates"]]
     scans = [len(r["coverage"]) for r in runs]
@@ -152,6 +177,9 @@ def summarise(runs: list[dict], strategy: str, world: str, max_scans: int, optio
         "world": world,
         "median_scans": float(np.median(n_s)),
         "coverage_at_termination": 100.0 * float(np.mean(c_term)),
+        "estimate_at_termination": 100.0 * float(np.mean(estimate_term)) if estimate_term else float("nan"),
+        "min_coverage_last": 100.0 * float(np.min(curves[:, -1])),
+        "stop_reasons": sorted({str(r["reason"]) for r in runs}),
         "coverage_at_10": 100.0 * float(np.mean(curves[:, 9])) if max_scans >= 10 else None,
         "coverage_at_30": 100.0 * float(np.mean(curves[:, 29])) if max_scans >= 30 else None,
         "path_length_m": float(np.mean([r["scan_path_m"] for r in runs])),
@@ -178,14 +206,14 @@ def summarise(runs: list[dict], strategy: str, world: str, max_scans: int, optio
 
 def print_table(rows: list[dict], max_scans: int) -> None:
     last = "c_a(30)" if max_scans >= 30 else f"c_a({max_scans})"
-    head = (f"{'Selection/Search':20s} {'world':15s} {'ñ_s':>5s} {'notch':>6s} {'c_a(n_s)':>8s} "
+    head = (f"{'Selection/Search':20s} {'world':18s} {'ñ_s':>5s} {'notch':>6s} {'c_a(n_s)':>8s} "
             f"{'c_a(10)':>7s} {'med(10)':>7s} {last:>8s} {'scans':>5s} {'l_s/m':>6s} {'t_nbs/s':>7s} "
             f"{'max t':>6s} {'cands':>5s} {'ē/mm':>5s} {'CD/mm':>5s} {'AUC%':>5s} {'ĉ_m%':>5s} {'fallbk':>6s}")
     print(head)
     print("-" * len(head))
     for r in rows:
         c10 = r["coverage_at_10"] if r["coverage_at_10"] is not None else float("nan")
-        print(f"{r['strategy']:20s} {r['world']:15s} {r['median_scans']:5.1f} ±{r['notch']:5.2f} "
+        print(f"{r['strategy']:20s} {r['world']:18s} {r['median_scans']:5.1f} ±{r['notch']:5.2f} "
               f"{r['coverage_at_termination']:8.2f} {c10:7.2f} {r['median_coverage_at_10']:7.2f} "
               f"{r['coverage_last']:8.2f} {r['scans_taken']:5.1f} {r['path_length_m']:6.2f} "
               f"{r['selection_s']:7.3f} {r['max_selection_s']:6.2f} {r['max_candidates']:5d} "
@@ -201,11 +229,15 @@ def save_png(rows: list[dict], path: str, max_scans: int) -> None:
     import matplotlib.pyplot as plt
 
     worlds = list(dict.fromkeys(r["world"] for r in rows))
-    fig, axes = plt.subplots(1, len(worlds), figsize=(6 * len(worlds), 4.5), dpi=110, squeeze=False)
+    columns = min(len(worlds), 4)
+    lines = -(-len(worlds) // columns)
+    fig, axes = plt.subplots(lines, columns, figsize=(6 * columns, 4.5 * lines), dpi=110, squeeze=False)
+    for ax in axes.flat[len(worlds):]:
+        ax.set_axis_off()
     x = np.arange(1, max_scans + 1)
     colours = {"random": "tab:gray", "ig": "tab:blue", "quality": "tab:green", "ig_quality": "tab:red"}
     styles = {"sphere": ":", "bs": "--", "bs_hr": "-"}  # colour = selection, line = search
-    for ax, world in zip(axes[0], worlds, strict=True):
+    for ax, world in zip(axes.flat, worlds, strict=False):
         for r in (r for r in rows if r["world"] == world):
             curves = 100.0 * r["curves"]
             median = np.median(curves, axis=0)
@@ -217,7 +249,8 @@ def save_png(rows: list[dict], path: str, max_scans: int) -> None:
         ax.set_title(f"{world} ({rows[0]['seeds']} seeds)")
         ax.set_xlabel("scans")
         ax.set_ylabel("c_a % (ground truth, τ = 3 mm)")
-        ax.set_ylim(60, 100.5)
+        ax.set_ylim(max(0.0, min(60.0, float(np.min([np.median(100.0 * r["curves"], axis=0)[-1] for r in rows
+                                                          if r["world"] == world])) - 5.0)), 100.5)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
@@ -266,6 +299,12 @@ def speed(repeat: int, world: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", default="bunny_pedestal,duck_pedestal,teddy_pedestal")
+    parser.add_argument("--set", choices=("broad",), default=None,
+                        help="run the broad object set (benchmarks/broad_set.yaml) instead of --worlds")
+    parser.add_argument("--objects", default="", help="--set broad: comma list of the set's objects (default all)")
+    parser.add_argument("--sensor", default="laser_striper", help="--set broad: laser_striper or depth_camera")
+    parser.add_argument("--missing", default="", help="write a picture of the uncovered surface of every run "
+                        "below 99 %% c_a into this directory")
     parser.add_argument("--seeds", default="0-4", help="e.g. 0-9 or 0,3,5")
     parser.add_argument("--strategies", default="table4.5", help="comma list, 'table4.5' or 'iros'")
     parser.add_argument("--max-scans", type=int, default=30)
@@ -297,6 +336,15 @@ def main(argv: list[str] | None = None) -> int:
 
     registry = Registry.load()
     worlds = [w for w in args.worlds.split(",") if w]
+    if args.set == "broad":
+        from broad_worlds import write_worlds
+
+        world_dir = Path(tempfile.mkdtemp(prefix="broad_worlds_"))
+        try:
+            names = [n for n in args.objects.split(",") if n]
+            worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names)]
+        except ValueError as error:
+            parser.error(str(error))
     if args.profile:
         from explore.core import BadInput
         from explore.sim import load_world_spec
@@ -321,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     threads = 1 if args.jobs > 1 else 0
     jobs = [(world, strategy, seed, max_scans,
              utility_overrides(registry, strategy, args.variant, args.normalise, args.hierarchy), fallback, threads,
-             args.profile)
+             args.profile, args.missing)
             for world in worlds for strategy in strategies for seed in seeds]
 
     def report(metrics: dict) -> None:
@@ -329,7 +377,8 @@ def main(argv: list[str] | None = None) -> int:
             return
         curve = [round(100 * c, 1) for c in metrics["coverage"]]
         print(f"  {metrics['strategy']} {metrics['world']} seed {metrics['seed']}: n_s={metrics['n_s']} c_a={curve} "
-              f"l_s={metrics['scan_path_m']:.2f} m, fallback {metrics['fallback_scans']}, {metrics['run_s']:.1f} s",
+              f"l_s={metrics['scan_path_m']:.2f} m, fallback {metrics['fallback_scans']}, {metrics['run_s']:.1f} s, "
+              f"ended: {metrics['reason']}",
               file=sys.stderr, flush=True)
 
     results: dict[tuple, dict] = {}
@@ -345,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
             results[job[:3]] = run_one(job)
             report(results[job[:3]])
     options = {"variant": args.variant or "need", "normalise": args.normalise or "max", "hierarchy": args.hierarchy}
-    rows = [summarise([results[(w, s, seed)] for seed in seeds], s, w, max_scans, options)
+    rows = [summarise([results[(w, s, seed)] for seed in seeds], s, Path(w).stem if args.set else w, max_scans, options)
             for w in worlds for s in strategies]
     if args.json:
         print(json.dumps([{k: r[k] for k in ROW_KEYS + EXTRA_KEYS} for r in rows], indent=1))
