@@ -373,8 +373,6 @@ def main(argv: list[str] | None = None) -> int:
             for world in worlds for strategy in strategies for seed in seeds]
 
     def report(metrics: dict) -> None:
-        if args.json:
-            return
         curve = [round(100 * c, 1) for c in metrics["coverage"]]
         print(f"  {metrics['strategy']} {metrics['world']} seed {metrics['seed']}: n_s={metrics['n_s']} c_a={curve} "
               f"l_s={metrics['scan_path_m']:.2f} m, fallback {metrics['fallback_scans']}, {metrics['run_s']:.1f} s, "
