@@ -100,8 +100,8 @@ def missing_surface_png(observable: np.ndarray, reconstructed: np.ndarray, tau: 
         ax.set_box_aspect(np.ptp(observable, axis=0) + 1e-6)
         ax.set_axis_off()
         ax.set_title(label)
-    fig.suptitle(f"{title}: c_a {100 * share:.1f} % of the observable surface (red: not covered within "
-                 f"{1000 * tau:.0f} mm, {int((~covered).sum())} of {len(covered)} points)")
+    fig.suptitle(f"{title}\nc_a {100 * share:.1f} % of the observable surface (red: not covered within "
+                 f"{1000 * tau:.0f} mm, {int((~covered).sum())} of {len(covered)} points)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
