@@ -323,6 +323,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="bunny only, seeds 0-2, 3 strategies, 12 scans (a few minutes)")
     parser.add_argument("--json", action="store_true", help="print only the rows as JSON")
     parser.add_argument("--png", default="", help="write the coverage-vs-scans figure here")
+    parser.add_argument("--runs-json", default="", help="write every run's curves (c_a, ĉ_m, d̄_m per scan), n_s, "
+                        "stop reason and fallback scans to this file")
     parser.add_argument("--speed", action="store_true", help="time one selection per candidate count and exit")
     parser.add_argument("--repeat", type=int, default=5, help="--speed: repetitions (best is reported)")
     args = parser.parse_args(argv)
@@ -391,6 +393,10 @@ def main(argv: list[str] | None = None) -> int:
         for job in jobs:
             results[job[:3]] = run_one(job)
             report(results[job[:3]])
+    if args.runs_json:
+        keys = ("strategy", "world", "seed", "n_s", "reason", "coverage", "coverage_estimate", "density", "sources",
+                "fallback_scans", "scan_path_m")
+        Path(args.runs_json).write_text(json.dumps([{k: m.get(k) for k in keys} for m in results.values()]))
     options = {"variant": args.variant or "need", "normalise": args.normalise or "max", "hierarchy": args.hierarchy}
     rows = [summarise([results[(w, s, seed)] for seed in seeds], s, Path(w).stem if args.set else w, max_scans, options)
             for w in worlds for s in strategies]
