@@ -1,0 +1,58 @@
+"""The broad object set of issue 20 (benchmarks/broad_set.yaml): every world loads, every object
+has its size, stands on the pedestal inside its region, and the missing-surface picture counts
+c_a as the library does."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+from broad_worlds import PEDESTAL_TOP, broad_objects, missing_surface_png, write_worlds  # noqa: E402
+
+from explore.mapping import coverage  # noqa: E402
+from explore.sim import load_world_spec  # noqa: E402
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def test_the_set_is_broad_and_every_world_loads(tmp_path: Path) -> None:
+    entries = broad_objects()
+    assert len(entries) >= 15 and len({e["name"] for e in entries}) == len(entries)
+    kinds = " ".join(e["kind"] for e in entries)
+    for kind in ("seed", "cavity", "hole", "thin", "random"):
+        assert kind in kinds, kind
+    for sensor in ("laser_striper", "depth_camera"):
+        paths = write_worlds(tmp_path / sensor, sensor)
+        assert len(paths) == len(entries)
+        for path in paths:
+            spec = load_world_spec(path)  # a missing mesh or a bad field raises BadInput
+            assert spec.sensor.plugin == sensor
+    with pytest.raises(ValueError, match="not in broad_set.yaml"):
+        write_worlds(tmp_path, names=["no_such_object"])
+
+
+@pytest.mark.parametrize("name", ["mug", "torus", "jenga"])
+def test_an_object_has_its_size_and_stands_on_the_pedestal(open_world, tmp_path: Path, name: str) -> None:  # noqa: ANN001
+    [path] = write_worlds(tmp_path, names=[name])
+    size = next(e["size"] for e in broad_objects() if e["name"] == name)
+    with open_world(str(path)) as sim:
+        vertices = np.asarray(sim.object_mesh().vertices)
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        assert np.max(hi - lo) == pytest.approx(size, rel=0.01)
+        assert lo[2] == pytest.approx(PEDESTAL_TOP, abs=0.002)
+        assert np.all(lo >= sim.spec.region_min - 1e-6) and np.all(hi <= sim.spec.region_max + 1e-6)
+
+
+def test_the_missing_surface_picture_counts_coverage_as_the_library(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    observable = rng.uniform(-0.05, 0.05, (2000, 3))
+    model = observable[observable[:, 0] < 0.02] + 0.001  # a third of the surface missing, the rest 1.7 mm off
+    share = missing_surface_png(observable, model, 0.003, tmp_path / "missing.png", "a test")
+    assert share == pytest.approx(coverage(model, observable, 0.003))
+    assert 0.6 < share < 0.75
+    assert (tmp_path / "missing.png").stat().st_size > 10_000
