@@ -25,7 +25,8 @@ class StartModelling(ExploreBehaviour):
     writes = ("modelling", "done", "reason")
     blocking = True
     params = (
-        Param("strategy", str, "ig_quality/bs_hr", "", "NBV strategy (overridden by --strategy)"),
+        Param("strategy", str, "ig_quality/bs_hr_calibrated", "", "NBV strategy (overridden by --strategy; the "
+              "thesis IG/Quality + BS/HR with the stop calibrated on the broad object set)"),
         Param("resolution", float, 0.005, "m", "PVS voxel edge length", low=1e-4),
         Param("max_scans", int, 30, "", "scan budget (overridden by --max-scans)", low=1),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise model"),

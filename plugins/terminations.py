@@ -24,7 +24,13 @@ class MaxScans(Termination):
 
 
 class CoverageTarget(Termination):
-    """Stop at ĉ_m >= target and d̄_m >= target, else at n_abort scans (thesis Sec. 4.6: 80 % / 20 % / 30)."""
+    """Stop at ĉ_m >= target and d̄_m >= target, else at n_abort scans (thesis Sec. 4.6: 80 % / 20 % / 30).
+
+    With ``exhausted_coverage`` < 1 it also stops at that lower ĉ_m when the strategy's generator
+    has nothing left to look at (boundary search and hole rescan find no open edge): ĉ_m
+    (Eq. 4.35) underestimates c_a by 1-38 points depending on the shape (docs/results.md, the
+    broad set), so a single target either stops early on some shapes or never on others.
+    """
 
     name = "coverage_target"
     params = (
@@ -36,6 +42,9 @@ class CoverageTarget(Termination):
               choices=("area", "border")),
         Param("switch_delta", float, 0.01, "", "advise a mode switch when ĉ_m grows less (Eq. 4.38); 0 = never",
               low=0.0),
+        Param("exhausted_coverage", float, 1.0, "", "also stop at this ĉ_m when the strategy's generator has no "
+              "candidate left (nothing more for boundary search / hole rescan to look at); 1 = never",
+              low=0.0, high=1.0),
     )
 
     def reset(self) -> None:
@@ -53,6 +62,10 @@ class CoverageTarget(Termination):
         if reaches(c, self.coverage) and reaches(d, self.density):
             return Decision(STOP, f"ĉ_m = {c:.3f} >= {self.coverage} and d̄_m = {d:.3f} >= {self.density}", SUCCESS,
                             margin)
+        if ctx.exhausted and self.exhausted_coverage < 1.0 and reaches(c, self.exhausted_coverage) \
+                and reaches(d, self.density):
+            reason = f"no candidate left at ĉ_m = {c:.3f} >= {self.exhausted_coverage}, d̄_m = {d:.3f} >= {self.density}"
+            return Decision(STOP, reason, SUCCESS, min(c - self.exhausted_coverage, d - self.density))
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET,
                             margin)
@@ -72,7 +85,7 @@ class NoCandidates(Termination):
     params = (Param("n_abort", int, 30, "", "stop after this many scans regardless", low=1),)
 
     def decide(self, ctx: PlanningContext) -> Decision:
-        if ctx.available == 0 and ctx.iteration > 0:
+        if (ctx.exhausted or ctx.available == 0) and ctx.iteration > 0:
             return Decision(STOP, "no candidate left", NO_CANDIDATES)
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached", BUDGET)

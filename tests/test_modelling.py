@@ -59,6 +59,18 @@ def test_terminations(registry) -> None:  # noqa: ANN001
     assert none_left.decide(ctx).stop
     ctx.available = 4
     assert not none_left.decide(ctx).stop
+    ctx.exhausted = True  # the strategy's generator had nothing; a fallback's candidates fill the stack
+    assert none_left.decide(ctx).stop
+    ctx.exhausted = False
+    # the calibrated stop: ĉ_m 94 %, or 85 % when boundary search / hole rescan has nothing left
+    calibrated = registry.create("strategy", "ig_quality/bs_hr_calibrated").strategy.build(registry)[2]
+    for history, exhausted, stop in [([0.8, 0.86], False, False), ([0.8, 0.86], True, True),
+                                     ([0.8, 0.84], True, False), ([0.9, 0.941], False, True)]:
+        ctx = ctx_with(history)
+        ctx.exhausted = exhausted
+        decision = calibrated.decide(ctx)
+        assert decision.stop == stop, (history, exhausted, decision)
+        assert not stop or decision.outcome == "success"
     below = registry.create("termination", "unknown_below", {"threshold": 30})
     ctx.best_diagnostics = {"unknown_first": 12.0}
     assert below.decide(ctx).stop and "12" in below.decide(ctx).reason

@@ -175,6 +175,7 @@ class PlanningContext:
     stack: CandidateStack | None = None
     best_diagnostics: dict[str, float] = field(default_factory=dict)
     available: int = 0  # candidates on the stack before the last selection
+    exhausted: bool = False  # the strategy's own generator left no candidate (a fallback's may be on the stack)
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     support_margin: float = 0.02
     registry: Any = None

@@ -72,9 +72,10 @@ class ModellingSession(Evaluation, CandidatePlanning):
         recording the scan count at which it did (the thesis' n_s); for benchmarks
     pvs_params, surface_params : extra keyword arguments of the PVS and the surface model
     fallback_generator : view generator used only when the strategy's generator leaves the
-        stack empty and ``continue_after_stop`` is set (so a benchmark run can go on to
-        ``max_scans``); None (default) disables it. Its scans are recorded with the source
-        ``fallback_<name>`` and counted in ``metrics()["fallback_scans"]``.
+        stack empty (``ctx.exhausted``: the termination rule decides whether the run goes on with
+        these candidates) or none of its candidates can be planned; None (default) disables it.
+        Its scans are recorded with the source ``fallback_<name>`` and counted in
+        ``metrics()["fallback_scans"]``.
     noise : execute motions with the robot's positioning noise model (Vasquez-Gomez Sec. A6)
     max_plan_attempts : candidates tried per iteration when planning the best one fails
     place_first : put the robot at the first scan instead of planning a motion to it (the

@@ -31,7 +31,8 @@ class CandidatePlanning:
                if not any(self.stack._similar(c.pose, pose) for pose in self.ctx.executed)
                and self.motion.may_reach(c.target)]
         self.stack.push(new)
-        if len(self.stack) == 0 and self.fallback is not None and self.continue_after_stop:
+        self.ctx.exhausted = len(self.stack) == 0
+        if self.ctx.exhausted and self.fallback is not None:  # the termination still decides whether to go on
             extra = self._fallback_candidates()
             self.stack.push(extra)
             new = new + extra
