@@ -103,8 +103,9 @@ def test_arm_run_plans_with_ompl(tmp_path, capsys) -> None:
 def test_thesis_benchmark_mode_scans_on_after_the_stop(tmp_path, capsys) -> None:
     """``continue_after_stop`` (Table 4.5): n_s is where the termination first said stop, the run
     goes on to the budget, and c_a at the stop is the curve's value at n_s."""
-    code, m, _ = _run(["model_object", "--world", "bunny_pedestal", "--max-scans", "6", "--set",
-                       "start_modelling.continue_after_stop=true", "--set", "start_modelling.fallback=none",
+    code, m, _ = _run(["model_object", "--world", "bunny_pedestal", "--strategy", "ig_quality/bs_hr",
+                       "--max-scans", "6", "--set", "start_modelling.continue_after_stop=true",
+                       "--set", "start_modelling.fallback=none",
                        "--out", str(tmp_path / "r")], capsys)
     assert code == 0 and m["scans"] == 6 and m["reason"] == "max_scans = 6 reached"
     assert 2 <= m["n_s"] < 6 and m["coverage_at_stop"] == pytest.approx(m["coverage_per_scan"][m["n_s"] - 1])
