@@ -13,8 +13,9 @@ class Termination(Plugin, ABC):
     """Contract of kind ``termination``: after each scan, continue, switch or stop.
 
     :meth:`decide` reads the :class:`~explore.nbv.candidates.PlanningContext` (ĉ_m and d̄_m
-    histories, scan count, the candidate stack, the last selection's diagnostics; never the
-    ground truth) and returns a :class:`~explore.nbv.candidates.Decision`: ``CONTINUE``,
+    histories, scan count, the candidate stack, ``exhausted`` when the strategy's generator had
+    nothing left (a fallback's candidates may be on the stack), the last selection's
+    diagnostics; never the ground truth) and returns a :class:`~explore.nbv.candidates.Decision`: ``CONTINUE``,
     ``SWITCH`` (the generator's next mode, e.g. boundary to hole) or ``STOP`` with an outcome
     (``explore.core.outcomes``: ``success`` only when the goal was reached, ``budget_exhausted``,
     ``no_candidates``) and a one-line reason.

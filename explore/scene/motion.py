@@ -48,7 +48,7 @@ class Move:
     planner: str
 
 
-def _split_drive(robot: Any, plan: Any, base_dofs: tuple[int, ...], length: float) -> tuple[Any, Any]:
+def _split_drive(robot: Any, plan: Any, length: float) -> tuple[Any, Any]:
     """(first leg, rest) of a plan at the base motion time of a straight ``length`` m drive;
     rest None when the plan moves its base for less than 1.5 legs (no short last leg).
 
@@ -266,7 +266,7 @@ class Mover:
         collisions = 0
         while True:
             leg, rest = (plan, None) if leg_length <= 0.0 or not self.base_dofs else \
-                _split_drive(self.robot, plan, self.base_dofs, leg_length)
+                _split_drive(self.robot, plan, leg_length)
             execution = self._execute(leg)
             collisions += len(execution.collisions)
             if execution.collided or rest is None:
