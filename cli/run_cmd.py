@@ -151,7 +151,7 @@ def summary_line(metrics: dict[str, Any]) -> str:
 def register_demo(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
-        max_scans: Annotated[int, typer.Option("--max-scans", min=1, help="Scan budget.")] = 10,
+        max_scans: Annotated[int, typer.Option("--max-scans", min=1, help="Scan budget (the thesis' 30).")] = 30,
         seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed.")] = 0,
     ) -> int:
         """The main job: model the bunny on its pedestal with Kriegel's NBS loop (< 3 min)."""
