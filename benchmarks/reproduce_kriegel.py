@@ -30,7 +30,7 @@ same candidate.
 strategy and one panel per world.
 
 ``--set broad`` runs the broad object set of issue 20 instead of ``--worlds``: 17 objects
-from pybullet_data (``benchmarks/broad_set.yaml``: the thesis objects, cavities and handles,
+from pybullet_data (``benchmarks/broad_set.yaml``: the thesis objects, containers, a handle,
 holes, thin and tall parts, a fixed random draw of ``random_urdfs``), each alone on the
 pedestal (``benchmarks/broad_worlds.py``), sensed by ``--sensor laser_striper`` (default) or
 ``depth_camera``; ``--objects`` picks some of them. ``--missing DIR`` writes, for every run
@@ -47,10 +47,11 @@ Full run::
     .venv/bin/python benchmarks/reproduce_kriegel.py --worlds bunny_pedestal,duck_pedestal,teddy_pedestal \\
         --seeds 0-9 --max-scans 30 --jobs 2 --png kriegel_table45.png
 
-Broad set (issue 20)::
+Broad set (issue 20; the table in docs/results.md, about 14 minutes)::
 
-    .venv/bin/python benchmarks/reproduce_kriegel.py --set broad --strategies ig_quality/bs_hr,ig_quality/sphere \\
-        --seeds 0 --max-scans 30 --jobs 2 --png broad.png --missing broad_missing
+    .venv/bin/python benchmarks/reproduce_kriegel.py --set broad \\
+        --strategies ig_quality/bs_hr,ig_quality/sphere,ig/sphere,quality/sphere,random/sphere \\
+        --fallback sphere --seeds 0-4 --max-scans 30 --jobs 2 --png broad.png --missing broad_missing
 """
 
 from __future__ import annotations
