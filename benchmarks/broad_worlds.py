@@ -80,14 +80,11 @@ def missing_surface_png(observable: np.ndarray, reconstructed: np.ndarray, tau: 
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from scipy.spatial import cKDTree
+
+    from explore.mapping import covered as covered_by
 
     observable = np.asarray(observable, dtype=float).reshape(-1, 3)
-    points = np.asarray(reconstructed, dtype=float).reshape(-1, 3)
-    covered = np.zeros(len(observable), dtype=bool)
-    if len(points) and len(observable):
-        distance, _ = cKDTree(points).query(observable, k=1, distance_upper_bound=tau)
-        covered = np.isfinite(distance)
+    covered = covered_by(reconstructed, observable, tau)
     share = float(covered.mean()) if len(covered) else 0.0
     rng = np.random.default_rng(0)
     keep = rng.permutation(len(observable))[:20000]

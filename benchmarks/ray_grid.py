@@ -78,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=17, help="seeds per world x strategy (3 x 4 x 17 = 204 runs)")
     parser.add_argument("--max-scans", type=int, default=2)
     parser.add_argument("--kill-after", type=int, default=0, help="runs done before the kill (default: half)")
-    parser.add_argument("--out", type=Path, default=Path(tempfile.mkdtemp(prefix="ray_grid_")))
+    parser.add_argument("--out", type=Path, default=None, help="results folder (default: a new temporary one)")
     args = parser.parse_args(argv)
+    args.out = args.out or Path(tempfile.mkdtemp(prefix="ray_grid_"))
     total = 12 * args.seeds
     kill_after = args.kill_after or total // 2
     if args.out.exists() and any(args.out.iterdir()):

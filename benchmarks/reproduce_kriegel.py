@@ -158,7 +158,6 @@ def missing_pictures(session, metrics: dict, directory: Path, world: str, strate
     if not shown:
         return
     gt = session.ground_truth()
-    directory.mkdir(parents=True, exist_ok=True)
     for scans in dict.fromkeys(shown):
         name = f"{world}_{strategy.replace('/', '-')}_{seed}_{scans}.png"
         missing_surface_png(gt.observable, session.point_history[scans - 1], gt.tau, directory / name,
@@ -370,6 +369,11 @@ def main(argv: list[str] | None = None) -> int:
                 registry.create("sensor", sensor.plugin, {**sensor.params, "profile": args.profile}, "--profile")
             except BadInput as error:
                 parser.error(str(error))
+    if args.missing:
+        try:
+            Path(args.missing).mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            parser.error(f"--missing: cannot create {args.missing}: {error.strerror}")
     seeds = parse_seeds(args.seeds)
     if args.strategies == "table4.5":
         strategies = list(TABLE_4_5)

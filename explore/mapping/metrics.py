@@ -183,16 +183,20 @@ def observable_surface(
     return points[visible]
 
 
-def coverage(reconstructed: Points3, observable: Points3, tau: float = 0.003) -> float:
-    """c_a: share of ``observable`` points with a reconstructed point within ``tau`` (m)."""
+def covered(reconstructed: Points3, observable: Points3, tau: float = 0.003) -> Array:
+    """(n,) True where an ``observable`` point has a reconstructed point within ``tau`` (m)."""
     observable = np.asarray(observable, dtype=float).reshape(-1, 3)
     reconstructed = np.asarray(reconstructed, dtype=float).reshape(-1, 3)
-    if len(observable) == 0:
-        return 0.0
-    if len(reconstructed) == 0:
-        return 0.0
+    if len(observable) == 0 or len(reconstructed) == 0:
+        return np.zeros(len(observable), dtype=bool)
     dist, _ = cKDTree(reconstructed).query(observable, k=1, distance_upper_bound=tau)
-    return float(np.count_nonzero(np.isfinite(dist)) / len(observable))
+    return np.isfinite(dist)
+
+
+def coverage(reconstructed: Points3, observable: Points3, tau: float = 0.003) -> float:
+    """c_a: share of ``observable`` points with a reconstructed point within ``tau`` (m)."""
+    mask = covered(reconstructed, observable, tau)
+    return float(mask.mean()) if len(mask) else 0.0
 
 
 def _distance_scene(meshes: Sequence[TriMesh]):  # -> open3d.t.geometry.RaycastingScene

@@ -60,8 +60,7 @@ def _split_drive(robot: Any, plan: Any, length: float) -> tuple[Any, Any]:
     if plan.controls is None:
         controls, path = robot.controls_from_path(plan.path)
         plan = MotionPlan(path, controls=controls, dt=float(robot.dt), planner=plan.planner)
-    base_moving = np.any(np.abs(np.asarray(plan.controls)[:, : robot.n_base_controls]) > 0.0, axis=1)
-    moved = np.cumsum(base_moving)
+    moved = np.cumsum(robot.noise_mask(plan.controls)[:, : robot.n_base_controls].any(axis=1))
     speed = float(robot.base_control_limits()[0])  # the straight drive speed (m/s)
     leg_steps = max(1, math.ceil(length / (speed * float(robot.dt))))
     if len(moved) == 0 or moved[-1] < 1.5 * leg_steps:
@@ -70,6 +69,12 @@ def _split_drive(robot: Any, plan: Any, length: float) -> tuple[Any, Any]:
     first = MotionPlan(plan.path[: k + 1], controls=plan.controls[:k], dt=plan.dt, planner=plan.planner)
     rest = MotionPlan(plan.path[k:], controls=plan.controls[k:], dt=plan.dt, planner=plan.planner)
     return first, rest
+
+
+def _driven(configs: np.ndarray, base_dofs: tuple[int, ...]) -> float:
+    """Metres the base travels along ``configs`` (its x, y)."""
+    xy = np.asarray(configs, dtype=float)[:, list(base_dofs[:2])]
+    return float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
 
 
 def target_start(target: Target) -> Pose:
@@ -301,9 +306,7 @@ class Mover:
         plan = self.planner.plan(problem, here, np.asarray(nominal, dtype=float), seed=int(self.rng.integers(2**31)))
         if plan is None:
             return None
-        xy = np.asarray(plan.path, dtype=float)[:, base[:2]]
-        driven = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
-        return plan if driven <= float(self.robot.replan_distance) else None
+        return plan if _driven(plan.path, self.base_dofs) <= float(self.robot.replan_distance) else None
 
     def _fly(self, target: Target) -> Move:
         start = target_start(target)
@@ -365,8 +368,7 @@ class Mover:
         sigma = np.asarray(execution.sigma, dtype=float)
         rot_var = float((sigma[self.robot.n_base_controls - 1] * dt) ** 2 * steps)
         trans_var = float((sigma[0] * dt) ** 2 * steps)
-        ix, iy, _ = self.base_dofs
-        driven = float(np.sum(np.linalg.norm(np.diff(execution.configs[:, [ix, iy]], axis=0), axis=1)))
+        driven = _driven(execution.configs, self.base_dofs)
         self._odometry_var += [trans_var + driven**2 * (self._odometry_var[1] + rot_var), rot_var]
 
     def odometry_sigmas(self) -> Array | None:
