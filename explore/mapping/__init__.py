@@ -27,6 +27,7 @@ from explore.mapping.metrics import (
 )
 from explore.mapping.pvs import PVS
 from explore.mapping.pvs_grid import FREE, OCCUPIED, THRESHOLDS, UNKNOWN, check_grid, entropy_bits, logit
+from explore.mapping.sparse_pvs import SparsePVS, make_pvs
 from explore.mapping.surface import SurfaceModel
 from explore.mapping.traversal import traverse
 from explore.mapping.visibility import (
@@ -66,6 +67,7 @@ __all__ = [
     "REAR_ENTROPY",
     "REAR_VOXEL",
     "SelectionTimer",
+    "SparsePVS",
     "SurfaceModel",
     "THRESHOLDS",
     "TRAVERSED",
@@ -90,6 +92,7 @@ __all__ = [
     "hole_fan_area",
     "holes_of",
     "logit",
+    "make_pvs",
     "observable_surface",
     "path_length",
     "rms_error",

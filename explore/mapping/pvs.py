@@ -139,10 +139,8 @@ class PVS(PVSFeatures, PVSQueries):
         self.independence_cell = self.resolution if independence_cell is None else float(independence_cell)
         self.independence_angle_deg = float(independence_angle_deg)
         self.hit_wins = bool(hit_wins)
-        check_grid(lo, hi, self.resolution)
         self.lattice = np.floor(lo / self.resolution + 1e-9).astype(np.int64)
-        upper = np.ceil(hi / self.resolution - 1e-9).astype(np.int64)
-        self.log_odds = np.zeros(tuple(int(n) for n in upper - self.lattice), dtype=np.float32)
+        self._allocate(lo, hi, np.ceil(hi / self.resolution - 1e-9).astype(np.int64) - self.lattice)
         self.features: dict[str, np.ndarray] = {}
         self._beam_keys = np.zeros(0, dtype=np.int64)
         self._mark: np.ndarray | None = None  # per-frame stamps of the update kernels
@@ -163,6 +161,12 @@ class PVS(PVSFeatures, PVSQueries):
         lo = np.asarray(min_corner, dtype=float) - margin
         hi = np.asarray(max_corner, dtype=float) + margin
         return cls(lo, hi, resolution, **kwargs)
+
+    def _allocate(self, lo: Array, hi: Array, extent: np.ndarray) -> None:
+        """The storage: a dense zero (unknown) log-odds grid of ``extent`` voxels, refused before it is
+        allocated if it would not fit in memory."""
+        check_grid(lo, hi, self.resolution)
+        self.log_odds = np.zeros(tuple(int(n) for n in extent), dtype=np.float32)
 
     # -- geometry ----------------------------------------------------------------------
     @property
@@ -241,13 +245,29 @@ class PVS(PVSFeatures, PVSQueries):
         if not keep.all():
             origins, directions = origins[keep], directions[keep]
             ranges, sigmas, frames = ranges[keep], sigmas[keep], frames[keep]
-        lat = self.lattice
         order = np.argsort(frames, kind="stable")
         if not np.all(order[1:] > order[:-1]):
             origins, directions, ranges = origins[order], directions[order], ranges[order]
             sigmas, frames = sigmas[order], frames[order]
         _, first = np.unique(frames, return_index=True)
         starts = np.append(first, len(frames)).astype(np.int64)
+        updates = self._apply(scan, origins, directions, ranges, sigmas, starts)
+        self._touch()
+        hits = int(np.isfinite(ranges).sum())
+        return {
+            "beams": n,
+            "used": int(keep.sum()),
+            "rejected": int(n - keep.sum()),
+            "hits": hits,
+            "no_returns": int(len(ranges) - hits),
+            "voxel_updates": int(updates),
+        }
+
+    def _apply(self, scan: Scan, origins: Points3, directions: Points3, ranges: Array, sigmas: Array,
+               starts: np.ndarray) -> int:
+        """Run the update kernel of the mode over the beams (sorted by frame, ``starts`` delimit the frames);
+        returns the number of voxel updates."""
+        lat = self.lattice
         if self._mark is None:
             self._mark = np.zeros(self.shape, dtype=np.int32)
         if self._stamp >= 2**30 - len(starts):
@@ -267,16 +287,7 @@ class PVS(PVSFeatures, PVSQueries):
                 ranges, starts, bool(scan.no_return_clears), float(scan.max_range),
                 logit(self.p_occ), logit(self.p_free), self.l_min, self.l_max,
             )
-        self._touch()
-        hits = int(np.isfinite(ranges).sum())
-        return {
-            "beams": n,
-            "used": int(keep.sum()),
-            "rejected": int(n - keep.sum()),
-            "hits": hits,
-            "no_returns": int(len(ranges) - hits),
-            "voxel_updates": int(updates),
-        }
+        return updates
 
     def grow(self, min_corner: Array, max_corner: Array) -> None:
         """Enlarge the box to also cover [min_corner, max_corner], keeping all data."""

@@ -14,9 +14,9 @@ covering every sensor origin so both maps traverse identical voxels; full table 
 0.7-2.9 M beams/s (5-9x OctoMap); entropy ray casting with visited marking reaches
 80-180 M voxel visits/s on one core. Memory is small at the resolutions we use: a 0.3 m
 object region at 5 mm is 216 k voxels (0.9 MB), a 1 x 1 x 0.5 m scene at 1 cm 0.5 M voxels
-(2 MB); even the benchmark's 1.4 x 1.4 x 0.8 m box at 1 cm is 1.5 M voxels (6 MB). A
-block-sparse layout would only pay at millimetre resolution over whole rooms; growing the
-box (:meth:`explore.mapping.pvs.PVS.grow`) covers the rest.
+(2 MB); even the benchmark's 1.4 x 1.4 x 0.8 m box at 1 cm is 1.5 M voxels (6 MB). Rooms at
+object resolution take the block-sparse layout (:mod:`explore.mapping.sparse_pvs`, chosen by
+:func:`~explore.mapping.make_pvs` beyond 32 M voxels).
 
 The traversal itself is :mod:`explore.mapping.traversal`, the updates :mod:`explore.mapping.pvs_updates`.
 

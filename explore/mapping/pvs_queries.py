@@ -30,10 +30,15 @@ class PVSQueries:
     # -- point queries -----------------------------------------------------------------
     def probability(self, points: Points3) -> Array:
         """Occupancy probability (n,) of the voxels containing ``points``; 0.5 outside."""
-        ijk, inside = self.index(points)
-        lo = np.zeros(len(ijk), dtype=np.float64)
-        lo[inside] = self.log_odds[tuple(ijk[inside].T)]
+        lo = self.log_odds_at(points).astype(np.float64)
         return 1.0 / (1.0 + np.exp(-lo))
+
+    def log_odds_at(self, points: Points3) -> np.ndarray:
+        """Log-odds (n,) float32 of the voxels containing ``points``; 0 (unknown) outside the grid."""
+        ijk, inside = self.index(points)
+        lo = np.zeros(len(ijk), dtype=np.float32)
+        lo[inside] = self.log_odds[tuple(ijk[inside].T)]
+        return lo
 
     def _classify(self, lo: np.ndarray, thresholds: str) -> np.ndarray:
         if thresholds not in THRESHOLDS:
@@ -56,10 +61,7 @@ class PVSQueries:
         "octomap" calls never-updated voxels unknown. Points outside the grid are unknown
         (an obstacle for "planning").
         """
-        ijk, inside = self.index(points)
-        lo = np.zeros(len(ijk), dtype=np.float32)
-        lo[inside] = self.log_odds[tuple(ijk[inside].T)]
-        return self._classify(lo, thresholds)
+        return self._classify(self.log_odds_at(points), thresholds)
 
     def states(self, thresholds: str = "validation") -> np.ndarray:
         """State codes of every voxel (grid shape, int8)."""
@@ -112,10 +114,11 @@ class PVSQueries:
         o, d, r = self._rays(origins, directions, max_range)
         if parallel is None:
             parallel = len(d) >= PARALLEL_MIN_RAYS
-        kernel = K.cast_rays if parallel else K.cast_rays_serial
+        kernels = self._ray_kernels()
+        kernel = kernels.cast_rays if parallel else kernels.cast_rays_serial
         free_below, occ_from = THRESHOLDS[thresholds]
         args = (
-            self.log_odds, self.lattice, self.resolution, o, d, r, float(min_range),
+            *self._ray_storage(), o, d, r, float(min_range),
             float(np.float32(logit(stop_p))), float(np.float32(logit(free_below))),
             float(np.float32(logit(occ_from))),
         )
@@ -131,6 +134,14 @@ class PVSQueries:
         if hit.any():
             hit_voxel[hit] = np.column_stack(np.unravel_index(hit_v[hit], self.shape))
         return RayResult(hit_t, hit_voxel, ent, unk, occ, fr, visits, self.shape, offsets, ids)
+
+    def _ray_kernels(self):  # noqa: ANN202 - the kernel module
+        """The module with the ray kernels of this storage (``cast_rays``, ``cast_rays_serial``)."""
+        return K
+
+    def _ray_storage(self) -> tuple:
+        """The leading arguments of the ray kernels: the storage and the grid's geometry."""
+        return self.log_odds, self.lattice, self.resolution
 
     def non_free_count(self) -> int:
         """N_v of thesis Eq. 4.32: voxels that are not free (p >= 0.05)."""
@@ -164,14 +175,7 @@ class PVSQueries:
         o, d, r = self._rays(origins, directions, max_range)
         l_stop = float(np.float32(logit(stop_p)))
         if visited:
-            if self._visited is None or self._visited.shape != self.shape or self._visit_stamp >= 2**31 - 2:
-                self._visited = np.zeros(self.shape, dtype=np.int32)
-                self._visit_stamp = 0
-            self._visit_stamp += 1
-            total, voxels, visits = K.entropy_visited(
-                self.log_odds, self._visited, self._visit_stamp, self.lattice, self.resolution,
-                o, d, r, float(min_range), l_stop,
-            )
+            total, voxels, visits = self._entropy_visited(o, d, r, float(min_range), l_stop)
         else:
             result = self.cast(o, d, r, min_range=min_range, stop_p=stop_p)
             total = float(result.entropy.sum())
@@ -183,6 +187,15 @@ class PVSQueries:
         if return_stats:
             return value, {"visits": int(visits), "voxels": int(voxels)}
         return value
+
+    def _entropy_visited(self, o: Points3, d: Points3, r: Array, min_range: float, l_stop: float) -> tuple:
+        """(entropy sum, voxels counted, voxel visits) of one candidate's beams, each voxel counted once."""
+        if self._visited is None or self._visited.shape != self.shape or self._visit_stamp >= 2**31 - 2:
+            self._visited = np.zeros(self.shape, dtype=np.int32)
+            self._visit_stamp = 0
+        self._visit_stamp += 1
+        return K.entropy_visited(self.log_odds, self._visited, self._visit_stamp, self.lattice, self.resolution,
+                                 o, d, r, min_range, l_stop)
 
     # -- planning support --------------------------------------------------------------
     def obstacle_grid(self, free_below: float = THRESHOLDS["planning"][0]) -> np.ndarray:

@@ -118,8 +118,7 @@ class RunVideo:
         image = np.full((PANEL[1], PANEL[0], 3), 255, np.uint8)
         if pvs is None:
             return image
-        log_odds = np.array(pvs.log_odds, dtype=float)
-        layer = log_odds[:, :, slice_height(log_odds)].T[::-1]  # rows: y up, columns: x
+        layer = pvs_layer(pvs)[::-1]  # rows: y up, columns: x
         colours = np.empty((*layer.shape, 3), np.uint8)
         colours[:] = _UNKNOWN
         colours[layer < -1e-3] = _FREE
@@ -131,11 +130,21 @@ class RunVideo:
         return image
 
 
-def slice_height(log_odds: np.ndarray) -> int:
-    """The z index of the slice to show: the layer with the most occupied voxels, or, when that
-    layer is a support (a table top: over a third of them), the median height of the occupied
-    voxels above it."""
-    counts = (log_odds > 1e-3).sum(axis=(0, 1))
+def pvs_layer(pvs: Any, cells: int = 2 * PANEL[0]) -> np.ndarray:
+    """Log-odds (ny, nx) of the horizontal layer of voxels :func:`slice_height` picks, sampled at voxel
+    centres (at most ``cells`` per side): the same picture from a dense grid and from a sparse one."""
+    occupied = pvs.occupied_points(0.5003)  # log-odds above 1e-3
+    heights = np.floor(occupied[:, 2] / pvs.resolution).astype(np.int64) - pvs.lattice[2]
+    k = slice_height(np.bincount(heights, minlength=pvs.shape[2])) if len(occupied) else pvs.shape[2] // 2
+    step = max(1, int(np.ceil(max(pvs.shape[:2]) / cells)))
+    i, j = np.arange(0, pvs.shape[0], step), np.arange(0, pvs.shape[1], step)
+    ijk = np.stack(np.meshgrid(i, j, [k], indexing="xy"), axis=-1).reshape(-1, 3)
+    return pvs.log_odds_at(pvs.centers(ijk)).reshape(len(j), len(i))
+
+
+def slice_height(counts: np.ndarray) -> int:
+    """The z index of the slice to show, from the occupied voxels per layer: the layer with the most, or,
+    when that layer is a support (a table top: over a third of them), the median height of those above it."""
     k = int(np.argmax(counts))
     above = counts[k + 2:]
     if counts[k] > counts.sum() / 3 and above.sum() > 0:
@@ -149,7 +158,7 @@ def _find_pvs(state: dict[str, Any]) -> Any:
     for value in list(state.values()):
         for holder in (value, getattr(value, "session", None)):
             pvs = getattr(holder, "pvs", None)
-            if pvs is not None and hasattr(pvs, "log_odds"):
+            if pvs is not None and hasattr(pvs, "occupied_points"):
                 return pvs
     return None
 

@@ -76,8 +76,6 @@ class SceneSession:
 
     def __init__(self, sim: Any, registry: Any, database: Any, settings: SceneSettings | None = None, *,
                  progress: Callable[[str], None] | None = None, **overrides: Any) -> None:
-        from explore.mapping import PVS
-
         self.sim = sim
         self.registry = registry
         self.db = database
@@ -87,13 +85,8 @@ class SceneSession:
         self.validator = _plugin(registry, "pose_validator", settings.validator)
         self.registrar = require_role(_plugin(registry, "registrar", settings.registrar, "scans"), "scans", "<scene>")
         self.progress = progress
-        lo = np.asarray(sim.spec.region_min, dtype=float)
-        hi = np.asarray(sim.spec.region_max, dtype=float)
-        resolution = settings.resolution
-        if resolution is None:
-            resolution = max(0.005, float(np.prod(hi - lo) / 4e6) ** (1.0 / 3.0))
-        self.resolution = float(resolution)
-        self.pvs = PVS.for_region(lo, hi, self.resolution)
+        self.resolution = 0.005 if settings.resolution is None else float(settings.resolution)
+        self.pvs = self.new_pvs()
         rng = np.random.default_rng(int(settings.seed))
         self.rng_sensor = np.random.default_rng(rng.integers(2**63))
         self.mover = Mover(sim, registry, settings.planner, settings.noise, seed=int(rng.integers(2**31)))
@@ -120,6 +113,15 @@ class SceneSession:
         self.viewing = ViewTaking(self)
 
     # -- bookkeeping -------------------------------------------------------------------------
+
+    def new_pvs(self) -> Any:
+        """An empty PVS over the world's region at the session's resolution, dense or sparse as the settings
+        say (:func:`~explore.mapping.make_pvs`)."""
+        from explore.mapping import make_pvs
+
+        return make_pvs(self.sim.spec.region_min, self.sim.spec.region_max, self.resolution,
+                        layout=self.settings.pvs_layout)
+
     def say(self, text: str) -> None:
         if self.progress is not None:
             self.progress(text)

@@ -15,7 +15,9 @@ class SceneSettings:
     segmenter, recognizer, validator, registrar : plugin names or (name, params)
     strategy : NBV strategy for modelling unknown objects (name, (name, params) or Strategy)
     seed : seeds the sensor noise, the execution noise and random choices
-    resolution : scene PVS voxel edge (None: 5 mm, coarser for large regions: at most 4 M voxels)
+    resolution : scene PVS voxel edge (None: 5 mm)
+    pvs_layout : the scene PVS's storage, "dense", "sparse" (hashed blocks, memory that follows the
+        observed space) or "auto" (:func:`~explore.mapping.make_pvs`: dense up to 32 M voxels)
     max_views : view budget of the whole exploration
     recognition_views : recognise an object from the points of at most this many of its views
         (those with the most points; render-and-compare costs one ray cast per view)
@@ -49,6 +51,7 @@ class SceneSettings:
     strategy: Any = None
     seed: int = 0
     resolution: float | None = None
+    pvs_layout: str = "auto"
     max_views: int = 80
     recognition_views: int = 6
     model_scans: int = 12

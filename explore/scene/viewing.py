@@ -184,8 +184,6 @@ class ViewTaking:
     def reintegrate(self, poses: Sequence[Pose]) -> None:
         """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
         scene = self.scene
-        from explore.mapping import PVS
-
         deltas = []
         for view, pose in zip(scene.views, poses, strict=True):
             current = view.recorded
@@ -202,7 +200,7 @@ class ViewTaking:
                 normals[mask] = c.normals[mask] @ delta[:3, :3].T
             obj.cluster = Cluster(c.id, points, normals, c.views, c.beams, c.up)
             obj._sample = None
-        scene.pvs = PVS.for_region(scene.sim.spec.region_min, scene.sim.spec.region_max, scene.resolution)
+        scene.pvs = scene.new_pvs()
         for view in scene.views:
             scene.pvs.integrate(view.scan)
         scene.mover.pvs = scene.pvs
