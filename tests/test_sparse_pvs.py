@@ -9,6 +9,7 @@ from test_pvs import bayes, make_scan
 from explore.core import BadInput
 from explore.mapping import PVS, SparsePVS, make_pvs
 from explore.mapping.octomap_bt import CENTER, read_bt
+from explore.runtime.video import pvs_layer
 from explore.sim import target_for
 
 CENTRE = np.array([0.0, 0.0, 0.58])
@@ -57,6 +58,8 @@ def test_sparse_gives_the_dense_numbers(bunny_scans, mode: str, tmp_path) -> Non
     assert np.array_equal(sparse.is_free(points, 0.01), dense.is_free(points, 0.01))
     assert np.array_equal(np.sort(sparse.occupied_points(), axis=0), np.sort(dense.occupied_points(), axis=0))
     assert len(sparse.voxel_mesh().triangles) == len(dense.voxel_mesh().triangles) > 0
+    layer = pvs_layer(dense)  # the run video's PVS panel
+    assert np.array_equal(pvs_layer(sparse), layer) and np.count_nonzero(layer > 0) > 50
     assert sparse.save_octomap(tmp_path / "s.bt") == dense.save_octomap(tmp_path / "d.bt")
     assert (tmp_path / "s.bt").read_bytes() == (tmp_path / "d.bt").read_bytes()
 

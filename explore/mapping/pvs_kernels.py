@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import os
+import types
 
 import numba
 import numpy as np
@@ -169,9 +170,25 @@ def cast_rays(
     return hit_t, hit_v, entropy, unknown, occupied, frontier, visits
 
 
-cast_rays_serial = njit(cache=True, nogil=True)(cast_rays.py_func)
-"""Serial build of :func:`cast_rays` (``prange`` runs as ``range``): no thread start-up,
-no slow-down when other processes hold the cores; used for small batches."""
+def serial_build(kernel):  # noqa: ANN001, ANN201 - a numba dispatcher in, one out
+    """A serial, cached build of a ``parallel=True`` kernel (``prange`` runs as ``range``).
+
+    It compiles a copy of the kernel's Python function under its own name: numba's cache keys an
+    entry by the function's name, bytecode and signature, not by ``parallel``, so a build of the same
+    function would load whichever of the two was compiled first (a "parallel" kernel running on one
+    thread, or the other way round).
+    """
+    func = kernel.py_func
+    copy = types.FunctionType(func.__code__.replace(co_name=func.__name__ + "_serial"), func.__globals__,
+                              func.__name__ + "_serial", func.__defaults__, func.__closure__)
+    copy.__qualname__ = func.__qualname__ + "_serial"
+    copy.__doc__ = func.__doc__
+    return njit(cache=True, nogil=True)(copy)
+
+
+cast_rays_serial = serial_build(cast_rays)
+"""Serial build of :func:`cast_rays`: no thread start-up, no slow-down when other processes hold the
+cores; used for small batches."""
 
 
 @njit(cache=True, nogil=True)

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from explore.mapping.pvs_kernels import _entropy
+from explore.mapping.pvs_kernels import _entropy, serial_build
 from explore.mapping.traversal import next_axis, ray_start, voxel_entry
 
 SHIFT = 3  # blocks of 2^3 = 8 voxels per edge
@@ -560,7 +560,7 @@ def cast_rays(
     return hit_t, hit_v, entropy, unknown, occupied, frontier, visits
 
 
-cast_rays_serial = njit(cache=True, nogil=True)(cast_rays.py_func)
+cast_rays_serial = serial_build(cast_rays)
 """Serial build of :func:`cast_rays` for small batches."""
 
 

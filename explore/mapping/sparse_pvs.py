@@ -48,9 +48,10 @@ class SparsePVS(PVS):
         self._store = self._packed(S.empty_store())
 
     def _check_keys(self, first: np.ndarray, end: np.ndarray) -> None:
-        if first.min() < -KEY_LIMIT or end.max() > KEY_LIMIT:
+        if first.min() < -KEY_LIMIT or end.max() > KEY_LIMIT or math.prod(int(v) for v in end - first) >= 2**62:
             raise BadInput("region", None, f"a sparse PVS at {1e3 * self.resolution:g} mm reaches only "
-                           f"{KEY_LIMIT * self.resolution:.4g} m from the origin on each axis")
+                           f"{KEY_LIMIT * self.resolution:.4g} m from the origin on each axis and holds at most "
+                           "2^62 voxels (flat voxel ids)")
 
     # -- geometry and memory -----------------------------------------------------------
     @property
