@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Param
+from explore.core import BUDGET, SUCCESS, Param
 from explore.perception import Q_H_MIN
 from explore.runtime import ExploreBehaviour, Outcome, failure, success
 
@@ -27,6 +27,24 @@ class SceneRun:
         self.session = session
         self.database = database
         self.patrol: dict[str, Any] = {}
+
+    @property
+    def end_outcome(self) -> str:
+        """BUDGET when the view budget ran out before a patrolled table got a view, else SUCCESS: the objects
+        of a table never looked at are not explained, however well the others went."""
+        return BUDGET if self._unseen_tables() else SUCCESS
+
+    @property
+    def end_reason(self) -> str:
+        unseen = self._unseen_tables()
+        if not unseen:
+            return ""
+        return f"view budget of {self.session.settings.max_views} used up before {', '.join(unseen)} got a view"
+
+    def _unseen_tables(self) -> list[str]:
+        if self.session.budget_left > 0:
+            return []
+        return [entry["table"] for entry in self.patrol.get("tables", []) if not entry["views"]]
 
     def live_stats(self) -> dict[str, Any]:
         s = self.session

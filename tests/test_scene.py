@@ -368,3 +368,19 @@ def test_scene_trees_run_with_an_arm_and_a_mobile_base(registry, tmp_path, tree,
         modelled = [o for o in metrics["objects"] if o["result"] == "modelled"]
         # at least one model per modelled object (a split cluster is stored as its own model)
         assert len([r for r in opened.records() if r.provenance == "modelled"]) >= len(modelled)
+
+
+@pytest.mark.slow
+def test_a_patrol_out_of_views_before_a_table_is_seen_says_so(registry, tmp_path):
+    """two_tables with two views: table_a takes both, table_b none; the run ends budget_exhausted naming
+    table_b, not success (its objects were never looked at). The room is mapped at 5 mm in the sparse PVS."""
+    from explore.mapping import SparsePVS
+    from explore.runtime import RunConfig, execute
+
+    result = execute(RunConfig(tree="table_patrol", world="two_tables", seed=0, out=tmp_path / "run", max_scans=2,
+                               settings={"start_scene.db": str(tmp_path / "objects.db")}), registry)
+    assert result.status == "budget_exhausted" and "table_b" in result.reason, result.reason
+    assert result.metrics["patrol"]["tables"] == [{"table": "table_a", "views": 2}, {"table": "table_b", "views": 0}]
+    assert result.metrics["objects_explained"] < result.metrics["objects_total"]
+    pvs = SparsePVS.load(tmp_path / "run" / "pvs.npz")
+    assert pvs.resolution == pytest.approx(0.005) and pvs.counts("octomap")["occupied"] > 10_000
