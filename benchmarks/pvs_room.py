@@ -37,7 +37,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from pvs_vs_octomap import octomap_clouds, stdout_to_stderr
+from pvs_vs_octomap import run_octomap, stdout_to_stderr
 
 from explore.mapping import PVS
 from explore.mapping.octomap_bt import DEPTH, expand_leaves, read_bt_leaves
@@ -93,24 +93,6 @@ def acquire(world: Path, views: int) -> tuple[list[Scan], list[tuple[np.ndarray,
         rng = np.random.default_rng(0)
         poses = tour(views)
         return [sim.sensor.acquire(sim, target_for(sim.sensor, eye, at), rng) for eye, at in poses], poses
-
-
-def run_octomap(scans: list[Scan], resolution: float, lazy: bool = True):  # -> pyoctomap.OcTree, seconds
-    import pyoctomap
-
-    clouds = [octomap_clouds(scan) for scan in scans]
-    tree = pyoctomap.OcTree(resolution)
-    tree.setProbHit(0.7)
-    tree.setProbMiss(0.4)
-    tree.setClampingThresMin(0.12)
-    tree.setClampingThresMax(0.97)
-    start = time.perf_counter()
-    for scan, per_frame in zip(scans, clouds, strict=True):
-        for points, origin in per_frame:
-            tree.insertPointCloud(points, origin, max_range=float(scan.max_range), lazy_eval=lazy)
-        if lazy:
-            tree.updateInnerOccupancy()
-    return tree, time.perf_counter() - start
 
 
 def octomap_to_bt(scans: list[Scan], resolution: float, path: Path, lazy: bool) -> tuple[float, int, int]:
