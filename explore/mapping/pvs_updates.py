@@ -12,6 +12,26 @@ from numba import njit
 from explore.mapping.traversal import next_axis, ray_start, voxel_entry
 
 
+@njit(cache=True, nogil=True, inline="always")
+def beam_segment(d, s, marking, no_return_clears, free_from, max_range, k_sigma, sigma_floor):
+    """The part of one beam the inverse sensor model touches (Kriegel thesis Fig. 3.10), for both layouts.
+
+    Returns ``use, hit, band, free_to, t_lo, t_end, inv2s2``: a return at range d with noise
+    s = max(sigma, sigma_floor) has the occupied band d +- k s and frees [free_from, d - k s]; a beam
+    without a return frees [free_from, max_range] if ``no_return_clears``. ``marking`` (the pass that
+    stamps a frame's band voxels) needs only the band. ``use`` is False when the beam touches nothing.
+    """
+    hit = not math.isnan(d)
+    if hit:
+        if math.isnan(s) or s < sigma_floor:
+            s = sigma_floor
+        band = k_sigma * s
+        t_lo = max(0.0, d - band) if marking else max(0.0, min(free_from, d - band))
+        return True, True, band, d - band, t_lo, d + band, 1.0 / (2.0 * s * s)
+    use = not marking and no_return_clears
+    return use, False, 0.0, max_range, max(0.0, free_from), max_range, 0.0
+
+
 @njit(cache=True, nogil=True)
 def _sensor_beam(
     flat, mflat, stamp, marking, n0, n1, n2, lat, res, origins, directions, b, d, s,
@@ -21,23 +41,10 @@ def _sensor_beam(
     st0 = n1 * n2
     st1 = n2
     inv_res = 1.0 / res
-    hit = not math.isnan(d)
-    if hit:
-        if math.isnan(s) or s < sigma_floor:
-            s = sigma_floor
-        band = k_sigma * s
-        free_to = d - band
-        t_end = d + band
-        inv2s2 = 1.0 / (2.0 * s * s)
-        t_lo = max(0.0, d - band) if marking else max(0.0, min(free_from, d - band))
-    else:
-        if marking or not no_return_clears:
-            return 0
-        band = 0.0
-        free_to = max_range
-        t_end = max_range
-        inv2s2 = 0.0
-        t_lo = max(0.0, free_from)
+    use, hit, band, free_to, t_lo, t_end, inv2s2 = beam_segment(
+        d, s, marking, no_return_clears, free_from, max_range, k_sigma, sigma_floor)
+    if not use:
+        return 0
     (ok, t0, t1, i0, i1, i2, s0, s1, s2, tm0, tm1, tm2, td0, td1, td2) = ray_start(
         origins[b, 0], origins[b, 1], origins[b, 2], directions[b, 0], directions[b, 1],
         directions[b, 2], t_lo, t_end, lat, inv_res, res, n0, n1, n2,

@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit, prange
 
 from explore.mapping.pvs_kernels import _entropy, serial_build
+from explore.mapping.pvs_updates import beam_segment
 from explore.mapping.traversal import next_axis, ray_start, voxel_entry
 
 SHIFT = 3  # blocks of 2^3 = 8 voxels per edge
@@ -222,23 +223,10 @@ def _sensor_beam(
 ):
     """One beam of :func:`update_sensor_model` (same rule as the dense PVS's); returns the updates."""
     values, marks = store[3], store[4]
-    hit = not math.isnan(d)
-    if hit:
-        if math.isnan(s) or s < sigma_floor:
-            s = sigma_floor
-        band = k_sigma * s
-        free_to = d - band
-        t_end = d + band
-        inv2s2 = 1.0 / (2.0 * s * s)
-        t_lo = max(0.0, d - band) if marking else max(0.0, min(free_from, d - band))
-    else:
-        if marking or not no_return_clears:
-            return 0
-        band = 0.0
-        free_to = max_range
-        t_end = max_range
-        inv2s2 = 0.0
-        t_lo = max(0.0, free_from)
+    use, hit, band, free_to, t_lo, t_end, inv2s2 = beam_segment(
+        d, s, marking, no_return_clears, free_from, max_range, k_sigma, sigma_floor)
+    if not use:
+        return 0
     (ok, t0, t1, i0, i1, i2, s0, s1, s2, tm0, tm1, tm2, td0, td1, td2) = ray_start(
         ox, oy, oz, ux, uy, uz, t_lo, t_end, lat, 1.0 / res, res, ext[0], ext[1], ext[2],
     )
@@ -307,21 +295,21 @@ def _sensor_beam(
 
 @njit(cache=True, nogil=True)
 def update_sensor_model(
-    store, stamp, hit_wins, lat, ext, res, origins, directions, ranges, sigmas, starts,
+    store, hit_wins, lat, ext, res, origins, directions, ranges, sigmas, starts,
     no_return_clears, free_from, max_range, k_sigma, sigma_floor, l_free, l_occ, l_min, l_max,
 ):
     """Inverse sensor model with range noise (Kriegel thesis Sec. 3.3.2, Fig. 3.10) on the block grid.
 
     The rule of :func:`explore.mapping.pvs_updates.update_sensor_model`, beam by beam and frame by
-    frame, allocating the blocks the beams pass. Returns (updates, stamp, store).
+    frame, allocating the blocks the beams pass; the frame stamps in ``store`` start empty (the
+    store's stamps live only while one scan is integrated). Returns (updates, store).
     """
     lf = np.float32(l_free)
     lmin = np.float32(l_min)
     lmax = np.float32(l_max)
     count = 0
     for f in range(starts.shape[0] - 1):
-        stamp += 1
-        tag = np.int32(2 * stamp)
+        tag = np.int32(2 * (f + 1))
         for marking in (True, False):
             if marking and not hit_wins:
                 continue
@@ -335,17 +323,18 @@ def update_sensor_model(
                     origins[b, 0], origins[b, 1], origins[b, 2], directions[b, 0], directions[b, 1], directions[b, 2],
                     d, sigmas[b], no_return_clears, free_from, max_range, k_sigma, sigma_floor, lf, l_occ, lmin, lmax,
                 )
-    return count, stamp, store
+    return count, store
 
 
 @njit(cache=True, nogil=True)
 def update_octomap(
-    store, stamp, lat, ext, res, origins, directions, ranges, starts, no_return_clears,
+    store, lat, ext, res, origins, directions, ranges, starts, no_return_clears,
     max_range, l_hit, l_miss, l_min, l_max,
 ):
     """OctoMap ``insertPointCloud`` semantics on the block grid, one cloud per frame segment.
 
-    The rule of :func:`explore.mapping.pvs_updates.update_octomap`. Returns (updates, stamp, store).
+    The rule of :func:`explore.mapping.pvs_updates.update_octomap`, frame stamps as in
+    :func:`update_sensor_model`. Returns (updates, store).
     """
     inv_res = 1.0 / res
     lh = np.float32(l_hit)
@@ -355,9 +344,8 @@ def update_octomap(
     count = 0
     occ = np.empty(origins.shape[0], np.int64)
     for f in range(starts.shape[0] - 1):
-        stamp += 1
-        occ_tag = np.int32(2 * stamp)
-        free_tag = np.int32(2 * stamp + 1)
+        occ_tag = np.int32(2 * (f + 1))
+        free_tag = np.int32(2 * (f + 1) + 1)
         n_occ = 0
         for b in range(starts[f], starts[f + 1]):
             d = ranges[b]
@@ -441,7 +429,7 @@ def update_octomap(
             loc = occ[j] % BLOCK_VOXELS
             values[row, loc] = min(values[row, loc] + lh, lmax)
             count += 1
-    return count, stamp, store
+    return count, store
 
 
 @njit(cache=True, nogil=True)

@@ -92,14 +92,14 @@ class SparsePVS(PVS):
         store = (keys, rows, fill, values, np.zeros(values.shape, np.int32), free, meta)  # frame stamps of this scan
         if self.mode == "sensor_model":
             free_from = -np.inf if scan.clear_from_origin else float(scan.min_range)
-            updates, _, store = S.update_sensor_model(
-                store, 0, self.hit_wins, self.lattice, self._extent, self.resolution, origins,
+            updates, store = S.update_sensor_model(
+                store, self.hit_wins, self.lattice, self._extent, self.resolution, origins,
                 directions, ranges, sigmas, starts, bool(scan.no_return_clears), free_from, float(scan.max_range),
                 self.k_sigma, self.sigma_floor, logit(self.p_free), logit(self.p_occ), self.l_min, self.l_max,
             )
         else:
-            updates, _, store = S.update_octomap(
-                store, 0, self.lattice, self._extent, self.resolution, origins, directions, ranges,
+            updates, store = S.update_octomap(
+                store, self.lattice, self._extent, self.resolution, origins, directions, ranges,
                 starts, bool(scan.no_return_clears), float(scan.max_range), logit(self.p_occ), logit(self.p_free),
                 self.l_min, self.l_max,
             )
