@@ -139,8 +139,8 @@ class PVS(PVSFeatures, PVSQueries):
         self.independence_cell = self.resolution if independence_cell is None else float(independence_cell)
         self.independence_angle_deg = float(independence_angle_deg)
         self.hit_wins = bool(hit_wins)
-        self.lattice = np.floor(lo / self.resolution + 1e-9).astype(np.int64)
-        self._allocate(lo, hi, np.ceil(hi / self.resolution - 1e-9).astype(np.int64) - self.lattice)
+        self.lattice, upper = self.voxel_box(lo, hi)
+        self._allocate(lo, hi, upper - self.lattice)
         self.features: dict[str, np.ndarray] = {}
         self._beam_keys = np.zeros(0, dtype=np.int64)
         self._mark: np.ndarray | None = None  # per-frame stamps of the update kernels
@@ -193,6 +193,13 @@ class PVS(PVSFeatures, PVSQueries):
     @property
     def l_max(self) -> float:
         return float(np.float32(logit(self.clamp[1])))
+
+    def voxel_box(self, min_corner: Array, max_corner: Array) -> tuple[np.ndarray, np.ndarray]:
+        """Lattice keys of the first voxel and one past the last of the whole voxels covering a box
+        (OctoMap's lattice: voxel edges at integer multiples of the resolution)."""
+        lo = np.floor(np.asarray(min_corner, dtype=float).reshape(3) / self.resolution + 1e-9).astype(np.int64)
+        hi = np.ceil(np.asarray(max_corner, dtype=float).reshape(3) / self.resolution - 1e-9).astype(np.int64)
+        return lo, hi
 
     def index(self, points: Points3) -> tuple[np.ndarray, np.ndarray]:
         """Grid indices (n, 3) of the voxels containing ``points`` and the inside mask (n,)."""
@@ -291,8 +298,7 @@ class PVS(PVSFeatures, PVSQueries):
 
     def grow(self, min_corner: Array, max_corner: Array) -> None:
         """Enlarge the box to also cover [min_corner, max_corner], keeping all data."""
-        lo = np.floor(np.asarray(min_corner, dtype=float) / self.resolution + 1e-9).astype(np.int64)
-        hi = np.ceil(np.asarray(max_corner, dtype=float) / self.resolution - 1e-9).astype(np.int64)
+        lo, hi = self.voxel_box(min_corner, max_corner)
         new_lo = np.minimum(self.lattice, lo)
         new_hi = np.maximum(self.lattice + np.asarray(self.shape), hi)
         if np.all(new_lo == self.lattice) and np.all(new_hi == self.lattice + np.asarray(self.shape)):

@@ -77,8 +77,7 @@ class SparsePVS(PVS):
 
     def grow(self, min_corner: Array, max_corner: Array) -> None:
         """Enlarge the box to also cover [min_corner, max_corner]; no data moves (keys are absolute)."""
-        lo = np.floor(np.asarray(min_corner, dtype=float) / self.resolution + 1e-9).astype(np.int64)
-        hi = np.ceil(np.asarray(max_corner, dtype=float) / self.resolution - 1e-9).astype(np.int64)
+        lo, hi = self.voxel_box(min_corner, max_corner)
         first = np.minimum(self.lattice, lo)
         end = np.maximum(self.lattice + self._extent, hi)
         self._check_keys(first, end)
@@ -123,33 +122,35 @@ class SparsePVS(PVS):
         lo[inside] = S.lookup(self._store, np.ascontiguousarray(ijk[inside] + self.lattice))
         return lo
 
-    def _stored(self) -> tuple[np.ndarray, np.ndarray]:
-        """Absolute voxel keys (m, 3) and log-odds (m,) of every observed voxel (log-odds not 0)."""
+    def _stored(self, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Absolute voxel keys (m, 3) and log-odds (m,) of every observed voxel (log-odds not 0), of the blocks
+        that meet the voxel box [lo, hi) if one is given."""
         coords, rows, fill = S.blocks_of(self._store)
+        if lo is not None and hi is not None:
+            meet = np.all(((coords + 1) << S.SHIFT > lo) & (coords << S.SHIFT < hi), axis=1)
+            coords, rows, fill = coords[meet], rows[meet], fill[meet]
         stored = rows >= 0
         values = self._store[3][rows[stored]]
         block, local = np.nonzero(values)
         uniform = np.flatnonzero(~stored & (fill != 0.0))
+        value = np.concatenate([values[block, local], np.repeat(fill[uniform], S.BLOCK_VOXELS)])
         block = np.concatenate([np.flatnonzero(stored)[block], np.repeat(uniform, S.BLOCK_VOXELS)])
         local = np.concatenate([local, np.tile(np.arange(S.BLOCK_VOXELS), len(uniform))])
-        value = np.concatenate([values[np.nonzero(values)], np.repeat(fill[uniform], S.BLOCK_VOXELS)])
         offset = np.column_stack([local >> (2 * S.SHIFT), (local >> S.SHIFT) & S.LOCAL, local & S.LOCAL])
         return (coords[block] << S.SHIFT) + offset, value
 
     def window(self, min_corner: Array, max_corner: Array) -> PVS:
         """A dense :class:`PVS` with the same parameters and log-odds over [min_corner, max_corner] (clipped
         to the box): for the whole-grid views (states, distance field, features, pictures) of one part."""
-        lo = np.maximum(np.floor(np.asarray(min_corner, dtype=float) / self.resolution + 1e-9).astype(np.int64),
-                        self.lattice)
-        hi = np.minimum(np.ceil(np.asarray(max_corner, dtype=float) / self.resolution - 1e-9).astype(np.int64),
-                        self.lattice + self._extent)
+        lo, hi = self.voxel_box(min_corner, max_corner)
+        lo, hi = np.maximum(lo, self.lattice), np.minimum(hi, self.lattice + self._extent)
         hi = np.maximum(hi, lo + 1)
         if float(np.prod(hi - lo)) > WINDOW_MAX_VOXELS:
             raise ValueError(f"a dense window of {' x '.join(str(int(v)) for v in hi - lo)} voxels is more than "
                              f"{WINDOW_MAX_VOXELS / 1e6:g} M: ask for a smaller part")
         dense = PVS(lo * self.resolution, hi * self.resolution, self.resolution, clamp=self.clamp,
                     **{k: v for k, v in self._params().items() if k not in ("format", "resolution", "clamp")})
-        keys, values = self._stored()
+        keys, values = self._stored(lo, hi)
         inside = np.all((keys >= lo) & (keys < hi), axis=1)
         ijk = keys[inside] - dense.lattice
         dense.log_odds[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = values[inside]
