@@ -255,6 +255,29 @@ def test_a_drive_in_legs_ends_nearer_its_goal(open_world, registry):
     assert np.median(errors[1.0]) < 0.5 * np.median(errors[0.0]), errors
 
 
+@pytest.mark.slow
+def test_a_base_that_localises_as_it_drives_knows_where_it_is(open_world, registry):
+    """The same 4-5 m drive with two seeds: on odometry alone the believed base pose ends
+    decimetres and degrees from the true one; matching the base laser against the known room
+    after every leg (AMCL-like) keeps the belief within 3 cm and 1 degree."""
+    from explore.core import look_at
+    from explore.motion import work_clock
+    from explore.scene import Mover
+
+    errors: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    for localise, seed in [(flag, s) for flag in errors for s in range(2)]:
+        with open_world("scene_small_mm") as sim, work_clock():
+            mover = Mover(sim, registry, seed=seed, localise=localise)
+            target, configs = mover.reach(look_at([0.0, 0.8, 1.1], [0.0, 0.1, 0.65]))
+            assert mover.move(target, configs) is not None
+            assert (mover.localisations > 0) == localise
+            believed, true = mover.believed_q[:3], sim.robot.q[:3]
+            turn = abs((believed[2] - true[2] + math.pi) % (2 * math.pi) - math.pi)
+            errors[localise].append((float(np.linalg.norm(believed[:2] - true[:2])), math.degrees(turn)))
+    assert all(d < 0.03 and a < 1.0 for d, a in errors[True]), errors
+    assert max(d for d, _ in errors[False]) > 3 * max(d for d, _ in errors[True]), errors
+
+
 def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(open_world, registry):
     """Noise can stop the base within its 1 cm planning clearance of the table, where every plan
     from there is refused. With no valid configuration on the last motion, the mover backs the

@@ -27,7 +27,7 @@ from explore.perception.fpfh import FPFHRansacRecognizer
 from explore.perception.fusion import FusedPose, fuse_poses
 from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model, accepted, rivals, surface_distances
 from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
-from explore.perception.incremental_graph import IncrementalPoseGraph
+from explore.perception.incremental_graph import IncrementalPoseGraph, LikelihoodField
 from explore.perception.normals import estimate_normals
 from explore.perception.plane_icp import as_2d_transform, plane_frame, plane_icp
 from explore.perception.pose_graph import PoseGraph, PoseGraphResult, pose_graph_from_scans, rebase_scan, sigmas6
@@ -58,6 +58,7 @@ __all__ = [
     "Hypothesis",
     "IcpResult",
     "IncrementalPoseGraph",
+    "LikelihoodField",
     "Model",
     "OCCUPIED_FROM",
     "ObjectDatabase",

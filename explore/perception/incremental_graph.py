@@ -335,8 +335,10 @@ class IncrementalPoseGraph:
 
     def _to_views(self, i: int, estimate: np.ndarray, step_sigmas: Any) -> Pose:
         """Correction (world frame) of node ``i``'s estimate against the points of all earlier
-        views at their estimates (scan to local map: more structure than one neighbour, so a
-        wrong turn rarely fits better).
+        views at their estimates near this view's (scan to local map: more structure than one
+        neighbour, so a wrong turn rarely fits better; the map is cropped to this view's points'
+        box widened by the search, so that the cost follows the views of the neighbourhood, not
+        of the whole room).
 
         Two kinds of start, the best Plane ICP fit wins: ``2 yaw_starts + 1`` turns about the
         view, and a correlative search (:class:`LikelihoodField` of the earlier views) within
@@ -347,6 +349,10 @@ class IncrementalPoseGraph:
         """
         src = transform_points(estimate[i], self.points[i])
         tgt = np.vstack([transform_points(estimate[j], self.points[j]) for j in range(i)])
+        if len(src) >= 20:  # the local map: earlier points within reach of a searched motion of this view
+            reach = 1.2  # the widest translation search (1 m) and the ICP radius
+            near = np.all((tgt >= src.min(axis=0) - reach) & (tgt <= src.max(axis=0) + reach), axis=1)
+            tgt = tgt[near]
         if len(src) < 20 or len(tgt) < 20:
             return np.eye(4)
         keys = np.floor(tgt / self.voxel).astype(np.int64)

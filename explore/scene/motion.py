@@ -10,9 +10,13 @@ robot: it moves in a straight line without noise.
 
 The robot's *belief* about where its sensor is comes from odometry: the base advances by
 the nominal (noise-free) motion of the executed controls, the arm joints are measured
-exactly. With a noisy base the believed pose drifts from the true one; scans are recorded at
-the believed pose and the gtsam pose graph (:mod:`explore.perception.pose_graph`) corrects them. The
-true pose is kept for the metrics only.
+exactly. With a noisy base the believed pose drifts from the true one. A base with a planar
+localisation laser localises as it drives, as AMCL does on Görner's robot: after every leg
+and at the end of a motion its laser scan is matched against the known environment
+(:class:`~explore.perception.LikelihoodField`) within three sigma of the odometry's drift,
+and the belief becomes the match. Scans are recorded at the believed pose and the gtsam pose
+graph (:mod:`explore.perception.pose_graph`) corrects them. The true pose is kept for the
+metrics only.
 """
 
 from __future__ import annotations
@@ -113,11 +117,13 @@ class Mover:
         to completion (on the wall clock a limit hit under CPU load changes the path, the noise
         drawn along it and so the run)
     min_path_fraction : shortest reachable share of a scan path that is still scanned
+    localise : a base with a planar laser localises its belief in the known environment after
+        every leg (:meth:`localise`); False: odometry only
     """
 
     def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
                  occupied_from: float = 0.75, seed: int = 0, planning_time: float = 10.0,
-                 min_path_fraction: float = 0.4) -> None:
+                 min_path_fraction: float = 0.4, localise: bool = True) -> None:
         self.sim = sim
         self.robot = sim.robot
         self.noise = bool(noise)
@@ -139,6 +145,11 @@ class Mover:
         self._pose: Pose | None = None  # free flyer: current sensor pose
         self._last_path: np.ndarray | None = None  # configurations of the last execution
         self._odometry_var = np.zeros(2)  # (translation m^2, rotation rad^2) since the last view
+        self._drift_var = np.zeros(2)  # the same since the belief was last localised
+        self._laser_rng = np.random.default_rng([seed, 1])
+        self._field: Any = None  # likelihood field of the known environment, built on first use
+        self.localisations = 0
+        self.localising = bool(localise)
 
     # -- queries ---------------------------------------------------------------------------
     @property
@@ -274,6 +285,7 @@ class Mover:
                 _split_drive(self.robot, plan, leg_length)
             execution = self._execute(leg)
             collisions += len(execution.collisions)
+            self.localise()
             if execution.collided or rest is None:
                 return collisions
             correction = self._correction(problem, rest.path[0])
@@ -291,6 +303,44 @@ class Mover:
         self._odometry(start, execution)
         self._back_off(execution)
         return execution
+
+    def localise(self, min_score: float = 0.3) -> bool:
+        """Match the base laser's scan against the known environment near the believed base pose
+        and take the match as the belief (AMCL-like); True if the scan matched.
+
+        The search window is three sigma of the drift since the last localisation (at least
+        5 cm / 1 deg, at most 0.5 m / 15 deg): a leg of a metre drifts centimetres, so the
+        window stays narrow and a symmetric room cannot pull the belief to its mirror image.
+        A match scoring below ``min_score`` (mean likelihood of the beams) leaves the belief
+        to odometry.
+        """
+        if not self.localising or not self.base_dofs or not self.noise or self.believed_q is None \
+                or not self.robot.has(Capability.PLANAR_LASER):
+            return False
+        ix, iy, ith = self.base_dofs
+        q = np.asarray(self.robot.q, dtype=float)
+        local = self.laser_points(_planar(q[ix], q[iy], q[ith]), self._laser_rng)
+        if local is None or len(local) < 20:
+            return False
+        if self._field is None:
+            from explore.perception import LikelihoodField
+            from explore.scene.scene_objects import environment_reference
+
+            self._field = LikelihoodField(environment_reference(self.sim))
+        believed = _planar(*self.believed_q[[ix, iy, ith]])
+        trans, rot = np.sqrt(self._drift_var)
+        search = (float(np.clip(3.0 * trans, 0.05, 0.5)), float(np.clip(3.0 * rot, math.radians(1.0),
+                                                                          math.radians(15.0))))
+        src = local @ believed[:3, :3].T + believed[:3, 3]
+        correction, score = self._field.match(src, believed[:2, 3], *search)
+        if score < min_score:
+            return False
+        self.believed_q[[ix, iy, ith]] = _planar_params(correction @ believed)
+        self._drift_var = np.zeros(2)
+        # the belief now errs by the match's error (about the laser's: 2 cm, 0.5 deg) at both views
+        self._odometry_var = np.minimum(self._odometry_var, [2.0 * 0.02**2, 2.0 * math.radians(0.5) ** 2])
+        self.localisations += 1
+        return True
 
     def _correction(self, problem: Any, nominal: Array) -> Any:
         """A plan from the robot's configuration to ``nominal`` (None: none needed or found).
@@ -370,6 +420,7 @@ class Mover:
         trans_var = float((sigma[0] * dt) ** 2 * steps)
         driven = _driven(execution.configs, self.base_dofs)
         self._odometry_var += [trans_var + driven**2 * (self._odometry_var[1] + rot_var), rot_var]
+        self._drift_var += [trans_var + driven**2 * (self._drift_var[1] + rot_var), rot_var]
 
     def odometry_sigmas(self) -> Array | None:
         """Sigmas (gtsam Pose3 order: rotation, translation) of the motion since the last call; resets."""

@@ -37,7 +37,8 @@ def known_tables(sim: Any, min_height: float = 0.3, max_height: float = 1.2, min
 
 
 def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, step: float = 0.5) -> list[Any]:
-    """One exploration step of Görner's surround-point view planning; the views taken."""
+    """One exploration step of Görner's surround-point view planning; the views taken (the pose
+    graph's corrections of earlier views are re-integrated once, after the last)."""
     robot = scene.sim.robot
     here = scene.mover.believed_pose()
     height = robot.camera_height
@@ -51,8 +52,9 @@ def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, s
             reached = scene.mover.reach(target)
             if reached is None:
                 continue
-            view = scene.viewing.add_view(reached[0], "surround", configs=reached[1])
+            view = scene.viewing.add_view(reached[0], "surround", configs=reached[1], defer=True)
             if view is not None:
                 taken.append(view)
             break
+    scene.viewing.settle()
     return taken

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import Pose, invert, pose_error, transform_points
+from explore.core import Pose, invert, transform_points
 from explore.perception import (
     Cluster,
     PoseGraphResult,
@@ -32,18 +32,34 @@ if TYPE_CHECKING:
     from explore.scene.session import SceneSession
 
 
+def _displacement(scan: Any, pose: Pose, recorded: Pose) -> float:
+    """The farthest any return of ``scan`` (recorded at ``recorded``) moves when the view moves to
+    ``pose``: the largest shift of the corners of the returns' bounding box (a rigid motion moves
+    a box's points no farther than its farthest corner)."""
+    points = scan.points()
+    if len(points) == 0:
+        return float(np.linalg.norm(pose[:3, 3] - recorded[:3, 3]))
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    return float(np.linalg.norm(transform_points(pose @ invert(recorded), corners) - corners, axis=1).max())
+
+
 class ViewTaking:
     """The viewing step: take, record and correct the views."""
 
     def __init__(self, scene: SceneSession) -> None:
         self.scene = scene
+        self.stale = False  # earlier views moved by the graph and not yet re-integrated (deferred)
 
     # -- views -------------------------------------------------------------------------------
     def add_view(self, target: Target, purpose: str, object_id: int | None = None,
-                 configs: list | None = None) -> View | None:
+                 configs: list | None = None, defer: bool = False) -> View | None:
         """Move there, scan, record the scan at the believed pose, integrate it into the PVS.
 
-        None if the view budget is spent or the robot cannot reach the target.
+        None if the view budget is spent or the robot cannot reach the target. With ``defer``
+        (a burst of views, such as a table surround) a pose-graph correction of earlier views
+        is not re-integrated at once but by :meth:`settle` after the burst: re-integrating
+        every view after every view costs the square of their number.
         """
         scene = self.scene
         if scene.budget_left <= 0:
@@ -69,7 +85,7 @@ class ViewTaking:
         if scene.graph is not None:
             start = time.perf_counter()
             self._apply(scene.graph.add(scan, view.believed, scene.mover.odometry_sigmas(),
-                                       scene.mover.laser_points(true_pose, scene.rng_sensor)))
+                                       scene.mover.laser_points(true_pose, scene.rng_sensor)), defer)
             scene.timed("registration_s", start)
         else:
             scene.pvs.integrate(scan)
@@ -145,14 +161,17 @@ class ViewTaking:
 
         A session with an incremental graph (a noisy mobile base) has registered and
         localised every view as it came; that graph's solution is the result (a batch graph
-        over the same views would lack its multi-start search and its map factors).
+        over the same views would lack its multi-start search and its map factors), and the
+        views are re-integrated only if it moves one of them by more than a voxel.
         """
         scene = self.scene
         start = time.perf_counter()
         if scene.graph is not None:
             poses = scene.graph.graph.optimize(scene.graph.max_iterations)
             scene.graph.poses = poses
-            self.reintegrate(list(poses))
+            if self.stale or any(_displacement(v.scan, p, v.recorded) > scene.resolution
+                                 for v, p in zip(scene.views, poses, strict=True)):
+                self.reintegrate(list(poses))
             scene.timed("registration_s", start)
             error = scene.graph.graph.error
             return PoseGraphResult(poses, np.stack(scene.graph.believed), list(scene.graph.graph.edges), *error)
@@ -163,27 +182,35 @@ class ViewTaking:
         scene.timed("registration_s", start)
         return result
 
-    def _apply(self, poses: np.ndarray, tolerance: tuple[float, float] = (0.002, math.radians(0.2))) -> None:
+    def _apply(self, poses: np.ndarray, defer: bool = False) -> None:
         """Take the incremental graph's poses: the new view is integrated at its corrected pose;
-        if an earlier view moved by more than ``tolerance`` (m, rad) everything is re-integrated."""
+        if the correction of an earlier view moves some of its returns by more than a PVS voxel,
+        everything is re-integrated (smaller corrections leave the map as it is within a voxel),
+        with ``defer`` only by the next :meth:`settle`."""
         scene = self.scene
-        moved = any(
-            max(err[0] / tolerance[0], err[1] / tolerance[1]) > 1.0
-            for err in (pose_error(p, v.recorded)
-                        for v, p in zip(scene.views[:-1], poses[:-1], strict=True))
-        )
-        if moved:
-            self.reintegrate(list(poses))
-            return
+        if any(_displacement(v.scan, p, v.recorded) > scene.resolution
+               for v, p in zip(scene.views[:-1], poses[:-1], strict=True)):
+            if not defer:
+                self.reintegrate(list(poses))
+                return
+            self.stale = True
         view = scene.views[-1]
         view.scan = rebase_scan(view.scan, poses[-1])
         view.corrected = np.asarray(poses[-1]).copy()
         scene.pvs.integrate(view.scan)
         scene.registered = True
 
+    def settle(self) -> None:
+        """Re-integrate at the graph's poses if corrections were deferred (``add_view(defer=True)``)."""
+        if self.stale and self.scene.graph is not None:
+            start = time.perf_counter()
+            self.reintegrate(list(self.scene.graph.poses))
+            self.scene.timed("registration_s", start)
+
     def reintegrate(self, poses: Sequence[Pose]) -> None:
         """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
         scene = self.scene
+        self.stale = False
         deltas = []
         for view, pose in zip(scene.views, poses, strict=True):
             current = view.recorded
