@@ -112,7 +112,7 @@ def write_world(directory: Path, tables: int, objects: int, robot: str = "mobile
     directory.mkdir(parents=True, exist_ok=True)
     data = world_data(tables, objects, robot)
     path = directory / f"{data['name']}_{robot}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    path.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120))
     return path
 
 

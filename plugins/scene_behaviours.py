@@ -158,7 +158,8 @@ class StartScene(ExploreBehaviour):
               low=0.0, high=1.0),
         Param("retry_scans", int, 3, "", "re-try recognition during the first modelling scans", low=0),
         Param("multi_view_views", int, 10, "", "view budget per ambiguous object", low=0),
-        Param("register", bool, True, "", "pose graph + re-integration after each view (noisy mobile base)"),
+        Param("register", bool, True, "", "pose graph + re-integration after each view (noisy mobile base without "
+              "a localisation laser)"),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise"),
         Param("flying_pixel_filter", float, 0.02, "", "drop beams with under 3 of 8 neighbours within this share of "
               "their depth (flying pixels; 0: off)", low=0.0, high=1.0),

@@ -109,6 +109,21 @@ def test_ppf_ignores_points_whose_normal_vanished(scene):
     _check_top(hypotheses, truth, "duck")
 
 
+def test_ppf_pose_clustering_leaves_out_references_without_votes():
+    """A reference point none of whose pairs matched has zero votes; a pose cluster of such points
+    alone used to average with zero total weight and crash the scene run ("Eigenvalues did not
+    converge", seen in a 10-object room). They are left out; the voted poses are clustered as before."""
+    from scipy.spatial.transform import Rotation
+
+    poses = np.tile(np.eye(4), (4, 1, 1))
+    poses[2:, :3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()  # a second, far pose: no votes
+    poses[1, :3, 3] = [0.002, 0.0, 0.0]
+    clustered = PPFRecognizer()._cluster_poses(poses, np.array([5, 3, 0, 0]), diameter=0.1)
+    assert len(clustered) == 1 and clustered[0][1] == 8
+    np.testing.assert_allclose(clustered[0][0][:3, 3], [0.00075, 0.0, 0.0], atol=1e-12)
+    assert PPFRecognizer()._cluster_poses(poses, np.zeros(4, dtype=int), diameter=0.1) == []
+
+
 def test_ppf_ranks_right_model_on_most_clusters(scene):
     scan, clusters, models, truth = scene
     recognizer = PPFRecognizer()

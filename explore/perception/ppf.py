@@ -230,7 +230,12 @@ class PPFRecognizer(RecognizerBase):
         return out
 
     def _cluster_poses(self, poses: np.ndarray, votes: np.ndarray, diameter: float) -> list[tuple[Pose, int]]:
-        """Greedy pose clustering (Drost §3.4): sum the votes of similar poses, average each cluster."""
+        """Greedy pose clustering (Drost §3.4): sum the votes of similar poses, average each cluster.
+
+        A reference point none of whose pairs matched has no vote and no pose; it is left out (a
+        cluster of such points alone has no weight to average with)."""
+        voted = votes > 0
+        poses, votes = poses[voted], votes[voted]
         order = np.argsort(-votes, kind="stable")
         max_t = self.cluster_translation * diameter
         max_r = math.radians(self.cluster_rotation_deg)

@@ -153,6 +153,11 @@ class Mover:
 
     # -- queries ---------------------------------------------------------------------------
     @property
+    def localises(self) -> bool:
+        """The belief is localised in the known environment as the base drives (:meth:`localise`)."""
+        return bool(self.localising and self.base_dofs and self.noise and self.robot.has(Capability.PLANAR_LASER))
+
+    @property
     def true_pose(self) -> Pose | None:
         """The sensor's true world pose (metrics only)."""
         if self.free_flyer:
@@ -314,8 +319,7 @@ class Mover:
         A match scoring below ``min_score`` (mean likelihood of the beams) leaves the belief
         to odometry.
         """
-        if not self.localising or not self.base_dofs or not self.noise or self.believed_q is None \
-                or not self.robot.has(Capability.PLANAR_LASER):
+        if not self.localises or self.believed_q is None:
             return False
         ix, iy, ith = self.base_dofs
         q = np.asarray(self.robot.q, dtype=float)

@@ -92,7 +92,8 @@ class SceneSession:
         self.mover = Mover(sim, registry, settings.planner, settings.noise, seed=int(rng.integers(2**31)))
         self.mover.pvs = self.pvs
         self.graph = None  # incremental pose graph, for a robot whose base odometry drifts
-        if settings.register and self.mover.base_dofs and settings.noise and hasattr(self.registrar, "incremental"):
+        if settings.register and self.mover.base_dofs and settings.noise and not self.mover.localises \
+                and hasattr(self.registrar, "incremental"):
             # a base on the floor: Plane ICP between views, each view localised in the known environment
             self.graph = self.registrar.incremental(plane=FLOOR, reference=environment_reference(sim))
         self.views: list[View] = []
@@ -104,7 +105,7 @@ class SceneSession:
         self.modelling_sessions: dict[int, Any] = {}
         self.added: list[str] = []
         self.known_at_start = list(database.names())
-        self.registered = False
+        self.registered = self.mover.localises  # views recorded in a map frame of their own (not the truth)
         self.started = time.perf_counter()
         self.timings: dict[str, float] = {}
         self.database_update = DatabaseUpdate(self)

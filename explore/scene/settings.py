@@ -35,8 +35,9 @@ class SceneSettings:
         novel reachable view of the object is taken instead
     split_distance, split_share : points of a recognised object farther than ``split_distance``
         from the model, if at least ``split_share`` of them, are another object touching it
-    register : grow a pose graph with every view when the robot has a noisy base (and correct
-        the views, the clusters and the PVS with it)
+    register : grow a pose graph with every view when the robot has a noisy base that cannot
+        localise itself (and correct the views, the clusters and the PVS with it); a base with a
+        planar laser localises every view in the known room as it drives (``Mover.localise``)
     flying_pixel_filter : drop the beams of every view that fewer than 3 of their 8 neighbours lie
         within this share of their depth of (flying pixels between two surfaces), 0: keep every beam
     median_px : median-filter every view's depth image over 3 or 5 pixels first (0: off)

@@ -176,6 +176,9 @@ class ViewTaking:
             error = scene.graph.graph.error
             return PoseGraphResult(poses, np.stack(scene.graph.believed), list(scene.graph.graph.edges), *error)
         believed = [v.believed for v in scene.views]
+        if scene.mover.localises:  # the base laser localised every view in the known room: nothing to correct
+            poses = np.stack([v.recorded for v in scene.views])
+            return PoseGraphResult(poses, np.stack(believed), [], 0.0, 0.0)
         result = scene.registrar.register([rebase_scan(v.scan, v.believed) if v.corrected is not None else v.scan
                                           for v in scene.views], believed)
         self.reintegrate(list(result.poses))
