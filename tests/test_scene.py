@@ -350,19 +350,18 @@ def _explore_scene(registry, tmp_path, tree: str, world: str) -> tuple[dict, Pat
 @pytest.mark.slow
 def test_scene_exploration_with_the_mobile_manipulator(registry, tmp_path):
     """The mobile manipulator (tuck and drive in 1 m legs, base laser on the walls and table legs):
-    every cluster is explained, the base bumps into something at most twice, the pose graph at
-    least halves the base's odometry error, and the known objects are recognised within 2° and,
-    in the world, within 5 mm plus twice the remaining mean localisation error (each view is
-    localised by its own laser scan, so the views' errors differ and no single view's error is
-    "the map's")."""
+    every cluster is explained, the base bumps into something at most twice, every view is
+    localised by the base laser as it drives (its recorded pose within 3 cm / 1 deg of the true one
+    on average; odometry alone drifts decimetres), and the known objects are recognised within
+    5 mm / 2 deg in the map and, in the world, within 5 mm plus twice the mean localisation error."""
     metrics, _ = _explore_scene(registry, tmp_path, "scene_exploration", "scene_small_mm")
     assert metrics["collisions"] <= 2  # driving in 1 m legs with 15 cm to spare (open loop: 8)
-    graph = metrics["pose_graph"]
-    assert graph["corrected_mm"] <= 0.5 * graph["odometry_mm"], graph
-    assert graph["corrected_deg"] <= 0.5 * graph["odometry_deg"], graph
+    localised = metrics["pose_graph"]
+    assert localised["corrected_mm"] <= 30.0 and localised["corrected_deg"] <= 1.0, localised
     for row in [o for o in metrics["objects"] if o["known"]]:
         assert row["result"] == "recognised", row
-        assert row["pose_error_mm"] < 5.0 + 2.0 * graph["corrected_mm"] and row["pose_error_deg"] < 2.0, row
+        assert row["map_error_mm"] < 5.0 and row["map_error_deg"] < 2.0, row
+        assert row["pose_error_mm"] < 5.0 + 2.0 * localised["corrected_mm"] and row["pose_error_deg"] < 2.0, row
 
 
 @pytest.mark.slow

@@ -88,7 +88,9 @@ class ViewTaking:
                                        scene.mover.laser_points(true_pose, scene.rng_sensor)), defer)
             scene.timed("registration_s", start)
         else:
+            start = time.perf_counter()
             scene.pvs.integrate(scan)
+            scene.timed("integrate_s", start)
         scene.say(f"view {view.index + 1}: {purpose} ({int(scan.hits.sum())} returns)")
         return view
 
@@ -162,7 +164,7 @@ class ViewTaking:
         A session with an incremental graph (a noisy mobile base) has registered and
         localised every view as it came; that graph's solution is the result (a batch graph
         over the same views would lack its multi-start search and its map factors), and the
-        views are re-integrated only if it moves one of them by more than a voxel.
+        PVS is rebuilt only if it moves a view's returns by more than a voxel.
         """
         scene = self.scene
         start = time.perf_counter()
@@ -172,6 +174,8 @@ class ViewTaking:
             if self.stale or any(_displacement(v.scan, p, v.recorded) > scene.resolution
                                  for v, p in zip(scene.views, poses, strict=True)):
                 self.reintegrate(list(poses))
+            else:
+                self._move_views(list(poses))
             scene.timed("registration_s", start)
             error = scene.graph.graph.error
             return PoseGraphResult(poses, np.stack(scene.graph.believed), list(scene.graph.graph.edges), *error)
@@ -186,21 +190,20 @@ class ViewTaking:
         return result
 
     def _apply(self, poses: np.ndarray, defer: bool = False) -> None:
-        """Take the incremental graph's poses: the new view is integrated at its corrected pose;
-        if the correction of an earlier view moves some of its returns by more than a PVS voxel,
-        everything is re-integrated (smaller corrections leave the map as it is within a voxel),
-        with ``defer`` only by the next :meth:`settle`."""
+        """Take the incremental graph's poses: every view's scan and cluster points move to their
+        corrected poses and the new view is integrated at its own. If the correction of an earlier
+        view moves some of its returns by more than a PVS voxel, the PVS is rebuilt too (at once,
+        or with ``defer`` by the next :meth:`settle`); smaller corrections leave its cells as they
+        are within a voxel."""
         scene = self.scene
-        if any(_displacement(v.scan, p, v.recorded) > scene.resolution
-               for v, p in zip(scene.views[:-1], poses[:-1], strict=True)):
-            if not defer:
-                self.reintegrate(list(poses))
-                return
-            self.stale = True
-        view = scene.views[-1]
-        view.scan = rebase_scan(view.scan, poses[-1])
-        view.corrected = np.asarray(poses[-1]).copy()
-        scene.pvs.integrate(view.scan)
+        far = any(_displacement(v.scan, p, v.recorded) > scene.resolution
+                  for v, p in zip(scene.views[:-1], poses[:-1], strict=True))
+        if far and not defer:
+            self.reintegrate(list(poses))
+            return
+        self.stale = self.stale or far
+        self._move_views(list(poses))
+        scene.pvs.integrate(scene.views[-1].scan)
         scene.registered = True
 
     def settle(self) -> None:
@@ -210,10 +213,9 @@ class ViewTaking:
             self.reintegrate(list(self.scene.graph.poses))
             self.scene.timed("registration_s", start)
 
-    def reintegrate(self, poses: Sequence[Pose]) -> None:
-        """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
+    def _move_views(self, poses: Sequence[Pose]) -> None:
+        """Move every view's scan and the cluster points it gave to ``poses``."""
         scene = self.scene
-        self.stale = False
         deltas = []
         for view, pose in zip(scene.views, poses, strict=True):
             current = view.recorded
@@ -230,6 +232,13 @@ class ViewTaking:
                 normals[mask] = c.normals[mask] @ delta[:3, :3].T
             obj.cluster = Cluster(c.id, points, normals, c.views, c.beams, c.up)
             obj._sample = None
+        scene.registered = True
+
+    def reintegrate(self, poses: Sequence[Pose]) -> None:
+        """Move every view (scan and cluster points) to ``poses`` and rebuild the PVS from scratch."""
+        scene = self.scene
+        self.stale = False
+        self._move_views(poses)
         scene.pvs = scene.new_pvs()
         for view in scene.views:
             scene.pvs.integrate(view.scan)
