@@ -14,9 +14,9 @@ exactly. With a noisy base the believed pose drifts from the true one. A base wi
 localisation laser localises as it drives, as AMCL does on Görner's robot: after every leg
 and at the end of a motion its laser scan is matched against the known environment
 (:class:`~explore.perception.LikelihoodField`) within three sigma of the odometry's drift,
-and the belief becomes the match. Scans are recorded at the believed pose and the gtsam pose
-graph (:mod:`explore.perception.pose_graph`) corrects them. The true pose is kept for the
-metrics only.
+and the belief becomes the match. Scans are recorded at the believed pose; for a base without
+such a laser the gtsam pose graph (:mod:`explore.perception.pose_graph`) corrects them. The true
+pose is kept for the metrics only.
 """
 
 from __future__ import annotations
@@ -341,8 +341,6 @@ class Mover:
             return False
         self.believed_q[[ix, iy, ith]] = _planar_params(correction @ believed)
         self._drift_var = np.zeros(2)
-        # the belief now errs by the match's error (about the laser's: 2 cm, 0.5 deg) at both views
-        self._odometry_var = np.minimum(self._odometry_var, [2.0 * 0.02**2, 2.0 * math.radians(0.5) ** 2])
         self.localisations += 1
         return True
 
