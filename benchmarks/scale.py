@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-from scale_worlds import GROWTH, ROBOTS, room_size, write_world  # noqa: E402
+from scale_worlds import GROWTH, ROBOTS, room_problem, room_size, write_world  # noqa: E402
 
 SPLIT = ("motion_s", "scan_s", "integrate_s", "registration_s", "segment_s", "recognise_s", "validate_s", "database_s")
 PARTS = (*(k.removesuffix("_s") for k in SPLIT), "other")  # other: learning the unknown objects, ticks
@@ -56,8 +56,7 @@ def _run(world: Path, out: Path, seed: int, timeout: float) -> tuple[float, floa
                 pid, status, usage = os.wait4(child.pid, 0)
                 break
             time.sleep(0.5)
-    child.returncode = os.waitstatus_to_exitcode(status)
-    return time.perf_counter() - started, usage.ru_maxrss / 1024.0, child.returncode
+    return time.perf_counter() - started, usage.ru_maxrss / 1024.0, os.waitstatus_to_exitcode(status)
 
 
 def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: int, run: Path) -> dict[str, Any]:
@@ -86,8 +85,14 @@ def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: 
         scene_s=round(metrics["scene_elapsed_s"], 1),
         **{k.removesuffix("_s"): round(metrics["timings_s"].get(k, 0.0), 1) for k in SPLIT},
     )
-    row["other"] = round(row["scene_s"] - sum(row[k] for k in PARTS[:-1]), 1)  # learning, ticks
+    row["other"] = round(_other(row), 1)
     return row
+
+
+def _other(row: dict[str, Any]) -> float:
+    """Scene seconds outside the timed parts (learning the unknown objects, ticks); rows saved before
+    a part was timed count it here."""
+    return row["scene_s"] - sum(row.get(k, 0.0) for k in PARTS[:-1])
 
 
 def _slope(rows: list[dict[str, Any]], key: str) -> float | None:
@@ -117,8 +122,7 @@ def _plot(rows: list[dict[str, Any]], path: Path, commit: str) -> None:
     bottom = np.zeros(len(last))
     labels = [f"{r['tables']}t/{r['objects']}o" for r in last]
     for key in PARTS:
-        other = [r["scene_s"] - sum(r.get(k, 0.0) for k in PARTS[:-1]) for r in last]
-        part = np.array(other if key == "other" else [r.get(key, 0.0) for r in last])
+        part = np.array([_other(r) if key == "other" else r.get(key, 0.0) for r in last])
         if part.any():
             axes[2].bar(labels, part, bottom=bottom, label=key)
             bottom += part
@@ -143,7 +147,12 @@ def main() -> int:
     parser.add_argument("--replot", type=Path, help="draw scale.png again from a scale.json, run nothing")
     args = parser.parse_args()
     if args.replot is not None:
-        saved = json.loads(args.replot.read_text())
+        try:
+            saved = json.loads(args.replot.read_text())
+            saved["rows"], saved["commit"]
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            print(f"error: --replot: {args.replot}: not a scale.json ({error})", file=sys.stderr)
+            return 2
         _plot(saved["rows"], args.replot.with_name("scale.png"), saved["commit"])
         print(args.replot.with_name("scale.png"))
         return 0
@@ -154,8 +163,9 @@ def main() -> int:
         except ValueError:
             print(f"error: --rooms: {text!r} is not TABLESxOBJECTS (e.g. 4x40)", file=sys.stderr)
             return 2
-        if tables not in (1, 2, 4):
-            print(f"error: --rooms: {text!r}: tables must be 1, 2 or 4", file=sys.stderr)
+        problem = room_problem(tables, objects)
+        if problem:
+            print(f"error: --rooms: {text!r}: {problem}", file=sys.stderr)
             return 2
         rooms.append((tables, objects))
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()

@@ -50,10 +50,20 @@ def room_size(tables: int) -> tuple[float, float]:
     return {1: (4.0, 4.0), 2: (6.0, 4.0), 4: (6.0, 6.0)}[tables]
 
 
+def room_problem(tables: int, objects: int) -> str | None:
+    """What is wrong with a room of ``tables`` tables and ``objects`` objects (None: nothing)."""
+    if tables not in (1, 2, 4):
+        return f"tables must be 1, 2 or 4, got {tables}"
+    if not 1 <= objects <= tables * GRID[0] * GRID[1]:
+        return f"{objects} objects do not fit on {tables} tables (1 to {GRID[0] * GRID[1]} each)"
+    return None
+
+
 def _objects(tables: int, count: int, seed: int) -> list[dict[str, Any]]:
     rng = np.random.default_rng(seed)
-    if count > tables * GRID[0] * GRID[1]:
-        raise ValueError(f"{count} objects do not fit on {tables} tables ({GRID[0] * GRID[1]} each)")
+    problem = room_problem(tables, count)
+    if problem:
+        raise ValueError(problem)
     draws = [(f"random_{d:03d}", f"random_urdfs/{d:03d}/{d:03d}.obj", [0, 0, 0], 0.10)
              for d in rng.choice(1000, size=count, replace=False)]
     known, unknown = list(KNOWN) + draws[::2], list(NAMED) + draws[1::2]
@@ -125,4 +135,7 @@ if __name__ == "__main__":
     parser.add_argument("--robot", choices=tuple(ROBOTS), default="mobile_base")
     parser.add_argument("--out", type=Path, default=Path("."))
     args = parser.parse_args()
+    problem = room_problem(args.tables, args.objects)
+    if problem:
+        parser.exit(2, f"error: --objects: {problem}\n")
     print(write_world(args.out, args.tables, args.objects, args.robot))

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, Points3, Pose, invert
+from explore.core import Array, Points3, Pose, invert, transform_points
 from explore.motion import Capability
 from explore.sim import ScanPath
 
@@ -335,8 +335,7 @@ class Mover:
         trans, rot = np.sqrt(self._drift_var)
         search = (float(np.clip(3.0 * trans, 0.05, 0.5)), float(np.clip(3.0 * rot, math.radians(1.0),
                                                                           math.radians(15.0))))
-        src = local @ believed[:3, :3].T + believed[:3, 3]
-        correction, score = self._field.match(src, believed[:2, 3], *search)
+        correction, score = self._field.match(transform_points(believed, local), believed[:2, 3], *search)
         if score < min_score:
             return False
         self.believed_q[[ix, iy, ith]] = _planar_params(correction @ believed)
@@ -421,8 +420,8 @@ class Mover:
         rot_var = float((sigma[self.robot.n_base_controls - 1] * dt) ** 2 * steps)
         trans_var = float((sigma[0] * dt) ** 2 * steps)
         driven = _driven(execution.configs, self.base_dofs)
-        self._odometry_var += [trans_var + driven**2 * (self._odometry_var[1] + rot_var), rot_var]
-        self._drift_var += [trans_var + driven**2 * (self._drift_var[1] + rot_var), rot_var]
+        for var in (self._odometry_var, self._drift_var):
+            var += [trans_var + driven**2 * (var[1] + rot_var), rot_var]
 
     def odometry_sigmas(self) -> Array | None:
         """Sigmas (gtsam Pose3 order: rotation, translation) of the motion since the last call; resets."""

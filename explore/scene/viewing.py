@@ -171,8 +171,7 @@ class ViewTaking:
         if scene.graph is not None:
             poses = scene.graph.graph.optimize(scene.graph.max_iterations)
             scene.graph.poses = poses
-            if self.stale or any(_displacement(v.scan, p, v.recorded) > scene.resolution
-                                 for v, p in zip(scene.views, poses, strict=True)):
+            if self.stale or self._moves_a_voxel(poses):
                 self.reintegrate(list(poses))
             else:
                 self._move_views(list(poses))
@@ -196,8 +195,7 @@ class ViewTaking:
         or with ``defer`` by the next :meth:`settle`); smaller corrections leave its cells as they
         are within a voxel."""
         scene = self.scene
-        far = any(_displacement(v.scan, p, v.recorded) > scene.resolution
-                  for v, p in zip(scene.views[:-1], poses[:-1], strict=True))
+        far = self._moves_a_voxel(poses[:-1])
         if far and not defer:
             self.reintegrate(list(poses))
             return
@@ -205,6 +203,12 @@ class ViewTaking:
         self._move_views(list(poses))
         scene.pvs.integrate(scene.views[-1].scan)
         scene.registered = True
+
+    def _moves_a_voxel(self, poses: Sequence[Pose]) -> bool:
+        """Moving the first ``len(poses)`` views to ``poses`` shifts some return by more than a PVS voxel."""
+        scene = self.scene
+        return any(_displacement(v.scan, p, v.recorded) > scene.resolution
+                   for v, p in zip(scene.views[: len(poses)], poses, strict=True))
 
     def settle(self) -> None:
         """Re-integrate at the graph's poses if corrections were deferred (``add_view(defer=True)``)."""
