@@ -77,6 +77,26 @@ def test_expected_utility_rejects_a_candidate_whose_noisy_reach_hits_an_obstacle
     assert far.weights.sum() == pytest.approx(1.0) and len(far.utilities) == 100
 
 
+def test_rollout_collisions_match_a_test_of_every_sample_at_every_step(cluttered) -> None:
+    """The rigid test moves its reference robot only now and then along the nominal base (and keeps it
+    across calls); it must still flag exactly the rollouts that a point-by-point test of every
+    sample's own robot at every step flags (open loop, 1.5 cm past chair_1: some hit, some do not)."""
+    robot = cluttered.robot
+    start, controls = plan_controls(robot, MotionPlan(_drive_past_chair(robot, 0.015)))
+    rollouts = follow_plan(robot, start, controls, np.random.default_rng(3), 12, False)
+    field = ObstacleField.from_sim(cluttered)
+    brute = np.array([any(field.clearance(robot.link_points(q)).min() < 0.0 for q in sample[1:])
+                      for sample in rollouts.configs])
+    assert 0 < brute.sum() < len(brute)
+    for _ in range(2):  # the second time with the references kept from the first
+        assert np.array_equal(colliding_rollouts(robot, rollouts, field), brute)
+    # 30 cm from the chair the reference follows the 0.65 m drive in a few moves, not one per step
+    start, controls = plan_controls(robot, MotionPlan(_drive_past_chair(robot, 0.3)))
+    nominal = follow_plan(robot, start, controls, None).nominal
+    moves = len({field.rigid_reference(robot, q).pose for q in nominal})
+    assert len(nominal) > 40 and moves <= 6
+
+
 def test_expected_utility_weights_by_probability(cluttered) -> None:
     robot = cluttered.robot
     plan = MotionPlan(_drive_past_chair(robot, 1.0))

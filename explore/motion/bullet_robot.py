@@ -347,9 +347,13 @@ class BulletRobot(Robot):
         does not drift (Vasquez-Gomez fitted sigma on executed rotations and translations)."""
         n_controls = self.n_base_controls + len(self.joint_dofs)
         controls = np.asarray(controls, dtype=float).reshape(len(controls), n_controls)  # (0, n) for a plan in place
+        groups = self.noise_groups()
+        member = np.zeros((len(groups), n_controls))  # (groups, controls)
+        for g, group in enumerate(groups):
+            member[g, group] = 1.0
         moving = np.abs(controls) > STILL
-        for group in self.noise_groups():
-            moving[:, group] = moving[:, group].any(axis=1, keepdims=True)
+        grouped = member.any(axis=0)
+        moving[:, grouped] = ((moving @ member.T) @ member)[:, grouped] > 0.0
         return moving
 
     def execute(

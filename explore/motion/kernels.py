@@ -94,21 +94,16 @@ def point_clearance(
 
 
 @njit(cache=True)
-def rigid_step_hit(
-    local: np.ndarray, bx: float, by: float, btheta: float, states: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-    margin: float, field: np.ndarray, lattice: np.ndarray, resolution: float, half_diagonal: float,
-    grid_lo: np.ndarray, grid_hi: np.ndarray,
-) -> tuple[int, int]:
-    """First sample whose base pose ``states[i]`` = (x, y, theta) puts the robot into an obstacle.
-
-    ``local`` (n, 3) are robot points in the base frame, the nominal base pose is (bx, by,
-    btheta). A sample moves every point by at most |dc| + R |dtheta| (R: the points' largest
-    distance from the base axis), so samples whose bound stays below the nominal points'
-    smallest clearance are safe; otherwise the points whose clearance is below the bound are
-    moved and tested (:func:`point_clearance` < 0). Returns (sample index or -1, samples tested).
-    With a PVS the clearance is measured between voxel centres (minus half a diagonal), so a point
-    may lie up to another half diagonal nearer to an obstacle voxel: the safe bound subtracts it.
-    """
+def rigid_clearances(
+    local: np.ndarray, bx: float, by: float, btheta: float, lo: np.ndarray, hi: np.ndarray, margin: float,
+    field: np.ndarray, lattice: np.ndarray, resolution: float, half_diagonal: float, grid_lo: np.ndarray,
+    grid_hi: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Robot points ``local`` (n, 3, base frame) at base pose (bx, by, btheta): their world x, y, a
+    lower bound on each point's clearance, the points' largest distance R from the base axis and
+    the smallest bound. With a PVS the clearance is measured between voxel centres (minus half a
+    diagonal), so a point may lie up to another half diagonal nearer to an obstacle voxel: the
+    bound subtracts it."""
     n = local.shape[0]
     wx, wy, clear = np.empty(n), np.empty(n), np.empty(n)
     c0, s0 = math.cos(btheta), math.sin(btheta)
@@ -125,6 +120,24 @@ def rigid_step_hit(
             clear[p] -= half_diagonal
         if clear[p] < least:
             least = clear[p]
+    return wx, wy, clear, radius, least
+
+
+@njit(cache=True)
+def rigid_first_hit(
+    z: np.ndarray, wx: np.ndarray, wy: np.ndarray, clear: np.ndarray, radius: float, least: float, bx: float,
+    by: float, btheta: float, states: np.ndarray, lo: np.ndarray, hi: np.ndarray, margin: float, field: np.ndarray,
+    lattice: np.ndarray, resolution: float, half_diagonal: float, grid_lo: np.ndarray, grid_hi: np.ndarray,
+) -> tuple[int, int]:
+    """First sample whose base pose ``states[i]`` = (x, y, theta) puts the robot into an obstacle.
+
+    The robot's points are given at the reference base pose (bx, by, btheta) by
+    :func:`rigid_clearances` (world ``wx``, ``wy``, heights ``z``, clearance bounds ``clear``).
+    A sample moves every point by at most |dc| + R |dtheta| from there, so samples whose bound
+    stays below the smallest clearance ``least`` are safe; otherwise the points whose clearance
+    is below the bound are moved and tested (:func:`point_clearance` < 0). Returns (sample index
+    or -1, samples tested).
+    """
     tested = 0
     for i in range(states.shape[0]):
         d_theta = states[i, 2] - btheta
@@ -134,13 +147,27 @@ def rigid_step_hit(
             continue
         tested += 1
         c, s = math.cos(d_theta), math.sin(d_theta)
-        for p in range(n):
+        for p in range(z.shape[0]):
             if clear[p] >= bound:
                 continue
             rx, ry = wx[p] - bx, wy[p] - by
             x = c * rx - s * ry + states[i, 0]
             y = s * rx + c * ry + states[i, 1]
-            if point_clearance(x, y, local[p, 2], lo, hi, margin, field, lattice, resolution, half_diagonal,
+            if point_clearance(x, y, z[p], lo, hi, margin, field, lattice, resolution, half_diagonal,
                                grid_lo, grid_hi) < 0.0:
                 return i, tested
     return -1, tested
+
+
+def rigid_step_hit(
+    local: np.ndarray, bx: float, by: float, btheta: float, states: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+    margin: float, field: np.ndarray, lattice: np.ndarray, resolution: float, half_diagonal: float,
+    grid_lo: np.ndarray, grid_hi: np.ndarray,
+) -> tuple[int, int]:
+    """First sample whose base pose ``states[i]`` = (x, y, theta) puts the robot, whose points
+    ``local`` (n, 3) are given in the base frame at the nominal base pose (bx, by, btheta), into
+    an obstacle: :func:`rigid_clearances` then :func:`rigid_first_hit`."""
+    grid = (field, lattice, resolution, half_diagonal, grid_lo, grid_hi)
+    wx, wy, clear, radius, least = rigid_clearances(local, bx, by, btheta, lo, hi, margin, *grid)
+    return rigid_first_hit(np.ascontiguousarray(local[:, 2]), wx, wy, clear, radius, least, bx, by, btheta,
+                           states, lo, hi, margin, *grid)

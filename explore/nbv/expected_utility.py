@@ -8,6 +8,7 @@ infeasible; else E(G) is the mean of g(s_i), or Algorithm 1's sum_i g(s_i) eta P
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3
-from explore.motion import MotionPlan, Rollouts, box_distance, follow_plan
+from explore.motion import MotionPlan, Rollouts, box_distance, follow_plan, rigid_clearances, rigid_first_hit
 
 
 # -- the bound on k (Eq. 11-18) --------------------------------------------------------------
@@ -60,6 +61,7 @@ class ObstacleField:
         self.pvs = pvs
         self._field: np.ndarray | None = None
         self._version = -1
+        self._references: OrderedDict[bytes, _RigidReference] = OrderedDict()
 
     @classmethod
     def from_sim(cls, sim: Any, pvs: Any = None, box_margin: float | None = None) -> ObstacleField:
@@ -73,7 +75,29 @@ class ObstacleField:
         if self._field is None or version != self._version:
             self._field = np.asarray(self.pvs.distance_field(), dtype=float)
             self._version = version
+            self._references.clear()
         return self._field
+
+    #: rigid references kept (about 0.2 MB each): every candidate of a view starts with the same motion
+    #: (e.g. the arm tucking), whose references are then computed once
+    REFERENCES_KEPT = 512
+
+    def rigid_reference(self, robot: Any, config: Array) -> _RigidReference:
+        """The robot at ``config`` for rigid planar tests of its samples (one per arm configuration,
+        moved along with the nominal base, see :class:`_RigidReference`)."""
+        if self.pvs is not None:
+            self._pvs_field()  # a new PVS version drops the references
+        config = np.asarray(config, dtype=float)
+        key = config[list(robot.joint_dofs)].tobytes()
+        reference = self._references.get(key)
+        if reference is None:
+            reference = self._references[key] = _RigidReference(robot, config, self)
+            if len(self._references) > self.REFERENCES_KEPT:
+                self._references.popitem(last=False)
+        else:
+            self._references.move_to_end(key)
+        reference.follow(config)
+        return reference
 
     def kernel_field(self) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
         """PVS distance field, lattice, voxel size and grid box for numba kernels (empty without a PVS)."""
@@ -214,29 +238,24 @@ def colliding_rollouts(robot: Any, rollouts: Rollouts, obstacles: ObstacleField,
     """(k,) True for each rollout with a state in the planning obstacles (latest steps first:
     collisions are likeliest where the drift is largest and the goal near the object).
 
-    When the noise moves only the planar base, every sample at a step is the nominal robot
-    moved rigidly in the plane (:func:`_rigid_step_collision`); with joint noise each sample's
-    own points are tested (slow); without noise every sample is the validated nominal.
+    When the noise moves only the planar base, every sample at a step is a reference robot moved
+    rigidly in the plane (:class:`_RigidReference`); with joint noise each sample's own points are
+    tested (slow); without noise every sample is the validated nominal.
     ``stop_at_first``: return as soon as one colliding rollout is found (Algorithm 1's test).
     """
     configs, nominal = rollouts.configs, rollouts.nominal
     sigma = np.asarray(robot.control_sigma(), dtype=float)
-    base, joints = list(robot.base_dofs), list(robot.joint_dofs)
+    base = list(robot.base_dofs)
     rigid = bool(base) and not np.any(sigma[int(robot.n_base_controls):] > 0)
     hits = np.zeros(len(configs), dtype=bool)
     if not np.any(sigma > 0):
         return hits
-    local_points: dict[bytes, np.ndarray] = {}  # robot points in the base frame per arm configuration
     for t in range(configs.shape[1] - 1, 0, -1):
         alive = np.flatnonzero(~hits)
         if rigid:
-            key = nominal[t][joints].tobytes()
-            if key not in local_points:
-                ref = nominal[t].copy()
-                ref[base] = 0.0
-                local_points[key] = np.ascontiguousarray(robot.link_points(ref))
+            reference = obstacles.rigid_reference(robot, nominal[t])
             while len(alive):
-                first = _rigid_step_collision(configs[alive, t], nominal[t], local_points[key], base, obstacles)[0]
+                first = reference.first_hit(configs[alive, t])
                 if first is None:
                     break
                 hits[alive[first]] = True
@@ -252,20 +271,43 @@ def colliding_rollouts(robot: Any, rollouts: Rollouts, obstacles: ObstacleField,
     return hits
 
 
-def _rigid_step_collision(states: np.ndarray, nominal: Array, local: Points3, base: list[int],
-                          obstacles: ObstacleField) -> tuple[int | None, int]:
-    """First sample (index) whose planar-moved robot hits an obstacle at one step; samples tested.
+class _RigidReference:
+    """The robot at one arm configuration and a reference base pose, with a lower bound on each of its
+    points' clearance (:func:`explore.motion.rigid_clearances`); samples are tested as planar moves
+    of it (:func:`explore.motion.rigid_first_hit`).
 
-    ``local``: robot points in the base frame at this step's arm configuration.
+    Computing the bounds costs a pass over every robot point, so the reference follows the nominal
+    base only when the nominal has moved more than half the smallest clearance away from it
+    (every point moves at most |dc| + R |dtheta|): the samples' bounds then grow by that move, the
+    test stays exact, and a drive far from obstacles needs a handful of passes instead of one per step.
     """
-    from explore.motion import rigid_step_hit
 
-    if len(local) == 0:
-        return None, 0
-    ix, iy, ith = base
-    field, lattice, resolution, grid_lo, grid_hi = obstacles.kernel_field()
-    hit, tested = rigid_step_hit(local, float(nominal[ix]), float(nominal[iy]), float(nominal[ith]),
-                                 np.ascontiguousarray(states[:, [ix, iy, ith]]), obstacles.lo, obstacles.hi,
-                                 obstacles.box_margin, field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution,
-                                 grid_lo, grid_hi)
-    return (None if hit < 0 else int(hit)), int(tested)
+    def __init__(self, robot: Any, config: Array, obstacles: ObstacleField) -> None:
+        ref = np.asarray(config, dtype=float).copy()
+        self.base = list(robot.base_dofs)
+        ref[self.base] = 0.0
+        local = np.ascontiguousarray(robot.link_points(ref))
+        self.local, self.z = local, np.ascontiguousarray(local[:, 2])
+        field, lattice, resolution, grid_lo, grid_hi = obstacles.kernel_field()
+        self.grid = (field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution, grid_lo, grid_hi)
+        self.boxes = (obstacles.lo, obstacles.hi, obstacles.box_margin)
+        self.pose: tuple[float, float, float] | None = None
+
+    def follow(self, config: Array) -> None:
+        """Move the reference to ``config``'s base pose unless it is still near enough (see the class)."""
+        x, y, theta = (float(config[i]) for i in self.base)
+        if self.pose is not None:
+            moved = math.hypot(x - self.pose[0], y - self.pose[1]) + self.radius * abs(theta - self.pose[2])
+            if moved == 0.0 or moved <= 0.5 * self.least:
+                return
+        self.pose = (x, y, theta)
+        self.wx, self.wy, self.clear, self.radius, self.least = rigid_clearances(
+            self.local, x, y, theta, *self.boxes, *self.grid)
+
+    def first_hit(self, states: np.ndarray) -> int | None:
+        """Index of the first of ``states`` (n, dof) whose robot hits an obstacle, or None."""
+        if len(self.local) == 0:
+            return None
+        hit, _ = rigid_first_hit(self.z, self.wx, self.wy, self.clear, self.radius, self.least, *self.pose,
+                                 np.ascontiguousarray(states[:, self.base]), *self.boxes, *self.grid)
+        return None if hit < 0 else int(hit)
