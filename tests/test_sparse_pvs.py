@@ -156,3 +156,14 @@ def test_a_scene_run_on_the_sparse_pvs_is_the_dense_run(tmp_path) -> None:  # no
         assert (out / "metrics.json").exists(), text[-2000:]
     differences = [line for line in run_differences(runs["dense"][0], runs["sparse"][0]) if "pvs_layout" not in line]
     assert not differences, "\n".join(differences[:20])
+
+
+def test_a_scene_tree_at_object_resolution_in_a_room_is_accepted_where_its_pvs_may_be_sparse(registry) -> None:  # noqa: ANN001
+    """Before a run: 2 mm over two_tables' room would be a 37 GiB dense grid; the scene PVS's layout is
+    auto (sparse at that size), so the run is accepted, and refused only with the dense layout."""
+    from explore.runtime import RunConfig, check_inputs
+
+    check_inputs(RunConfig("table_patrol", "two_tables", settings={"resolution": 0.002}), registry)
+    with pytest.raises(BadInput, match="would need"):
+        check_inputs(RunConfig("table_patrol", "two_tables", settings={"resolution": 0.002,
+                                                                          "start_scene.pvs_layout": "dense"}), registry)

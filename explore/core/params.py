@@ -65,6 +65,9 @@ class Param:
 
     def convert(self, value: Any, source: str, field: str) -> Any:
         """Return ``value`` converted to this parameter's type and unit, or raise BadInput."""
+        if value is None and self.default is not None:  # e.g. ``--set key=``
+            expected = f"one of {list(self.choices)}" if self.choices else _KIND.get(self.type, self.type.__name__)
+            raise BadInput(source, field, f"is empty: expected {expected}")
         if self.type is list:
             if not isinstance(value, list | tuple):
                 raise BadInput(source, field, f"expected a list, got {brief(value)}")
@@ -103,6 +106,10 @@ class Param:
         if self.choices is not None and out not in self.choices:
             raise BadInput(source, field, f"{out!r} is not one of {list(self.choices)}")
         return out
+
+
+_KIND = {int: "an integer", float: "a number", bool: "true or false", str: "a string", list: "a list",
+         dict: "a mapping"}
 
 
 def _number(value: Any, kind: type, unit: str, source: str, field: str) -> float | int:

@@ -170,7 +170,7 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
         scoped = config.scoped(prefixes[kind])
         if scoped:
             validate_params(info.params, scoped, "--set", f"{prefixes[kind]}.")
-    _check_grid_size(config, tree_file, overrides, spec)
+    _check_grid_size(config, tree_file, overrides, spec, registry)
     if config.planning_clock not in PLANNING_CLOCKS:
         raise BadInput("--planning-clock", None,
                        f"{config.planning_clock!r} is not one of {', '.join(PLANNING_CLOCKS)}")
@@ -181,9 +181,12 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     return tree_file, overrides
 
 
-def _check_grid_size(config: RunConfig, tree_file: Any, overrides: dict[str, dict[str, Any]], spec: Any) -> None:
-    """The voxel size (``--set resolution=``, else the tree's) is finite and positive, and the world's
-    region at that size fits in memory: checked before the run starts, not as a MemoryError in it."""
+def _check_grid_size(config: RunConfig, tree_file: Any, overrides: dict[str, dict[str, Any]], spec: Any,
+                     registry: Any) -> None:
+    """The voxel size (``--set resolution=``, else the tree's) is finite and positive, and a dense grid
+    over the world's region at that size fits in memory: checked before the run starts, not as a
+    MemoryError in it. A tree whose region PVS may be sparse (a ``pvs_layout`` of auto or sparse:
+    hashed blocks, memory that follows what the rays reach) is not held to the dense grid's memory."""
     if "resolution" in config.settings:
         resolution = Param("resolution", float, 0.005, "m", low=1e-6).convert(
             config.settings["resolution"], "--set", "resolution")
@@ -195,6 +198,13 @@ def _check_grid_size(config: RunConfig, tree_file: Any, overrides: dict[str, dic
         if not sizes:
             return
         resolution, source, field_ = min(sizes), str(spec.path), "region"
+    for node in tree_file.root.walk():
+        if not node.behaviour:
+            continue
+        layout = next((p for p in registry.get("behaviour", node.behaviour).params if p.name == "pvs_layout"), None)
+        if layout is not None and overrides.get(node.behaviour, {}).get(
+                "pvs_layout", node.params.get("pvs_layout", layout.default)) != "dense":
+            return
     check_grid(spec.region_min, spec.region_max, resolution, source, field_)
 
 
