@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import NO_CANDIDATES, Param
+from explore.motion import Capability
 from explore.nbv import STOP, Decision
 from explore.runtime import ExploreBehaviour, Outcome, failure, success
 
@@ -31,11 +32,20 @@ class StartModelling(ExploreBehaviour):
         Param("max_scans", int, 30, "", "scan budget (overridden by --max-scans)", low=1),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise model"),
         Param("max_plan_attempts", int, 10, "", "candidates tried per scan when planning the best fails", low=1),
-        Param("fallback", str, "sphere", "", "view generator tried when no candidate of the strategy can be "
-              "reached (robots with a limited workspace); none = no fallback"),
+        Param("fallback", str, "auto", "", "view generator tried when no candidate of the strategy is left or "
+              "can be reached; auto = reachable (views of the robot's own configurations) for an arm on a fixed "
+              "base, the sphere for other robots; none = no fallback"),
         Param("continue_after_stop", bool, False, "", "scan on to the budget after the termination said stop "
               "(thesis Table 4.5: n_s is where it first did, c_a(30) after the budget)"),
     )
+
+    def _fallback(self, robot: Any) -> str | None:
+        """The fallback view generator's name (see the ``fallback`` parameter)."""
+        name = self.p["fallback"]
+        if name == "auto":
+            fixed_arm = robot.has(Capability.ARM) and not robot.has(Capability.MOBILE_BASE)
+            return "reachable" if fixed_arm else "sphere"
+        return None if name in ("", "none") else name
 
     def work(self) -> Outcome:
         from explore.nbv import ModellingSession
@@ -55,7 +65,7 @@ class StartModelling(ExploreBehaviour):
             planner=(config.planner, config.scoped("planner")),
             noise=self.p["noise"],
             max_plan_attempts=self.p["max_plan_attempts"],
-            fallback_generator=None if self.p["fallback"] in ("", "none") else self.p["fallback"],
+            fallback_generator=self._fallback(ctx.sim.robot),
             continue_after_stop=self.p["continue_after_stop"],
         )
         ctx.state["modelling"] = ModellingOutputs(session, strategy_name, ctx)

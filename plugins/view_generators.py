@@ -26,6 +26,19 @@ from explore.nbv import (
 from explore.sim import ScanPath
 
 
+def sweep_target(ctx: PlanningContext, pose: Array, path_length: float) -> Any:
+    """The view ``pose`` for an area sensor; for a line sensor a scan path of ``path_length`` centred on it
+    along its y axis (the sweep direction); None when it dips below the support plane."""
+    target: Any = pose
+    if ctx.sensor.geometry == "line":
+        half = 0.5 * path_length * pose[:3, 1]
+        start, end = pose.copy(), pose.copy()
+        start[:3, 3] -= half
+        end[:3, 3] += half
+        target = ScanPath(start, end, getattr(ctx.sensor, "speed", 0.05))
+    return clip_above(target, ctx.lowest_sensor_z)  # objects cannot be viewed from below
+
+
 # ---------------------------------------------------------------------------------------
 # sphere
 # ---------------------------------------------------------------------------------------
@@ -72,20 +85,11 @@ class Sphere(ViewGenerator):
             return []
         self._done = True
         out = []
-        speed = getattr(ctx.sensor, "speed", 0.05)
         for index, (eye, view) in enumerate(self.views(ctx)):
             pose = frame_from(view, any_sweep(view), eye)
             if pose is None or in_environment_boxes(ctx, eye[None])[0]:
                 continue
-            if ctx.sensor.geometry == "line":
-                half = 0.5 * self.path_length * pose[:3, 1]
-                start, end = pose.copy(), pose.copy()
-                start[:3, 3] -= half
-                end[:3, 3] += half
-                target: Any = ScanPath(start, end, speed)
-            else:
-                target = pose
-            target = clip_above(target, ctx.lowest_sensor_z)  # objects cannot be viewed from below
+            target = sweep_target(ctx, pose, self.path_length)
             if target is None:
                 continue
             out.append(Candidate(target, self.name, {"kind": "sphere", "index": index}, None, ctx.iteration))
@@ -107,7 +111,6 @@ class RandomViews(ViewGenerator):
         radius = float(ctx.sensor.optimal_distance + 0.25 * np.max(ctx.region_max - ctx.region_min))
         low = np.sin(np.deg2rad(self.min_elevation_deg))
         out = []
-        speed = getattr(ctx.sensor, "speed", 0.05)
         while len(out) < self.count:
             d = ctx.rng.normal(size=3)
             d /= np.linalg.norm(d)
@@ -118,18 +121,74 @@ class RandomViews(ViewGenerator):
             pose = frame_from(-d, sweep, eye)
             if pose is None or in_environment_boxes(ctx, eye[None])[0]:
                 continue
-            target: Any = pose
-            if ctx.sensor.geometry == "line":
-                half = 0.5 * self.path_length * pose[:3, 1]
-                start, end = pose.copy(), pose.copy()
-                start[:3, 3] -= half
-                end[:3, 3] += half
-                target = ScanPath(start, end, speed)
-            target = clip_above(target, ctx.lowest_sensor_z)
+            target = sweep_target(ctx, pose, self.path_length)
             if target is None:
                 continue
             out.append(Candidate(target, self.name, {"kind": "random"}, None, ctx.iteration))
         return out
 
 
-PLUGINS = [Sphere, RandomViews]
+# ---------------------------------------------------------------------------------------
+# reachable views
+# ---------------------------------------------------------------------------------------
+class ReachableViews(ViewGenerator):
+    """Views the robot can take: sensor poses of random configurations within its joint limits that
+    look at the region at the sensor's optimal distance, spread over positions and directions.
+
+    The sphere and the boundary candidates are placed for the object, not for the robot: a
+    fixed-base arm reaches few of them (in ``workcell`` about one in seven views along a surface
+    normal at the optimal distance), while the surface it can see from some reachable pose is far
+    larger (``benchmarks/reach_limit.py``). These candidates are reachable by construction (the
+    planner still checks the scan path, collisions and the approach), in the spirit of a capability
+    map (Zacharias et al. 2007); the fallback of an arm on a fixed base (``start_modelling.fallback``).
+    """
+
+    name = "reachable"
+    persistent = True
+    params = (
+        Param("samples", int, 20000, "", "random configurations tried", low=1),
+        Param("count", int, 243, "", "candidates kept, spread over positions and view directions", low=1),
+        Param("path_length", float, 0.3, "m", "scan path length for line sensors", low=0.01),
+        Param("direction_weight", float, 0.2, "m/rad", "metres a radian of view direction counts as when "
+              "spreading the candidates", low=0.0),
+    )
+
+    def reset(self) -> None:
+        self._done = False
+
+    def poses(self, ctx: PlanningContext) -> np.ndarray:
+        """(n, 4, 4) sensor poses of random configurations whose optical axis meets the region at the
+        sensor's optimal distance, outside the known environment."""
+        robot = ctx.robot
+        lower, upper = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)
+        configs = lower + ctx.rng.random((self.samples, len(lower))) * (upper - lower)
+        poses = np.array([robot.fk(q) for q in configs])
+        if hasattr(robot, "set_config"):
+            robot.set_config(robot.q)
+        aim = poses[:, :3, 3] + float(ctx.sensor.optimal_distance) * poses[:, :3, 2]
+        inside = np.all((aim >= ctx.region_min) & (aim <= ctx.region_max), axis=1)
+        inside &= ~in_environment_boxes(ctx, poses[:, :3, 3])
+        return poses[inside]
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        if self._done:
+            return []
+        self._done = True
+        poses = self.poses(ctx)
+        if len(poses) == 0:
+            return []
+        features = np.hstack([poses[:, :3, 3], self.direction_weight * poses[:, :3, 2]])
+        chosen = [0]  # farthest-point spreading: each next pose the farthest from those chosen
+        gap = np.linalg.norm(features - features[0], axis=1)
+        while len(chosen) < min(self.count, len(poses)):
+            chosen.append(int(np.argmax(gap)))
+            gap = np.minimum(gap, np.linalg.norm(features - features[chosen[-1]], axis=1))
+        out = []
+        for index in chosen:
+            target = sweep_target(ctx, poses[index], self.path_length)
+            if target is not None:
+                out.append(Candidate(target, self.name, {"kind": "reachable", "index": index}, None, ctx.iteration))
+        return out
+
+
+PLUGINS = [Sphere, RandomViews, ReachableViews]

@@ -330,3 +330,26 @@ def make_target_path(pose: np.ndarray, length: float) -> ScanPath:
     start[:3, 3] -= 0.5 * length * pose[:3, 1]
     end[:3, 3] += 0.5 * length * pose[:3, 1]
     return ScanPath(start, end)
+
+
+def test_reachable_views_are_poses_the_arm_takes_looking_into_the_region(registry, workcell) -> None:  # noqa: ANN001
+    """The arm's own configurations give the candidates: each scan path's middle is a pose the arm reaches
+    (IK within 1 mm / 0.5 deg from its configuration's neighbourhood), its optical axis meets the region at
+    the sensor's optimal distance, and the candidates spread (no two the same); a boundary candidate along a
+    surface normal is reached about one time in seven in this cell (benchmarks/reach_limit.py)."""
+    from explore.nbv import CandidateStack
+
+    robot, sensor = workcell.robot, workcell.sensor
+    ctx = PlanningContext(pvs=None, surface=None, grid=None, sensor=sensor, robot=robot,
+                          region_min=np.asarray(workcell.spec.region_min, float),
+                          region_max=np.asarray(workcell.spec.region_max, float), stack=CandidateStack(),
+                          rng=np.random.default_rng(0))
+    gen = registry.create("view_generator", "reachable", {"samples": 4000, "count": 12})
+    found = gen.generate(ctx)
+    assert 8 <= len(found) <= 12 and gen.generate(ctx) == []  # once per run, as the sphere
+    middles = np.array([c.target.mid for c in found])
+    aim = middles[:, :3, 3] + sensor.optimal_distance * middles[:, :3, 2]
+    assert np.all((aim >= ctx.region_min - 1e-9) & (aim <= ctx.region_max + 1e-9))
+    assert min(np.linalg.norm(a[:3, 3] - b[:3, 3]) for i, a in enumerate(middles) for b in middles[i + 1:]) > 0.02
+    reached = sum(robot.ik(pose, np.random.default_rng(1)) is not None for pose in middles)
+    assert reached >= 0.75 * len(found)
