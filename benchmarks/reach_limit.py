@@ -165,7 +165,7 @@ def plot(result: dict[str, Any], path: str) -> None:
         ax.set_box_aspect(np.ptp(points, axis=0) + 1e-9)
     fig.legend(*fig.axes[0].get_legend_handles_labels(), loc="lower center", markerscale=12, ncol=2)
     fig.suptitle(f"{result['world']} ({result['robot']}): reach limit {result['reach_limit']:.1%} of the observable "
-                 f"surface, {result['configurations']} configurations tried)",
+                 f"surface ({result['configurations']} configurations tried)",
                  fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -27,7 +27,7 @@ from explore.motion.bullet_robot import BulletRobot
 from explore.motion.collision import BulletCollider, Part, self_collision_pairs
 from explore.motion.feedback import Rollouts, control_pieces, follow_plan
 from explore.motion.geometric import OPTIONAL_GEOMETRIC, geometric_planner_names, plan, planner_class, straight_line
-from explore.motion.kernels import rigid_clearances, rigid_first_hit, rigid_step_hit
+from explore.motion.kernels import rigid_clearances, rigid_first_hit
 from explore.motion.kinodynamic import control_planner_names, plan_kinodynamic
 from explore.motion.mobile import PlanarChecker, box_distance, plan_mobile
 from explore.motion.noise import truncated_normal, truncated_normal_logpdf
@@ -80,7 +80,6 @@ __all__ = [
     "planner_class",
     "rigid_clearances",
     "rigid_first_hit",
-    "rigid_step_hit",
     "scan_path_poses",
     "self_collision_pairs",
     "straight_line",

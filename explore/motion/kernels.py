@@ -158,16 +158,3 @@ def rigid_first_hit(
                 return i, tested
     return -1, tested
 
-
-def rigid_step_hit(
-    local: np.ndarray, bx: float, by: float, btheta: float, states: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-    margin: float, field: np.ndarray, lattice: np.ndarray, resolution: float, half_diagonal: float,
-    grid_lo: np.ndarray, grid_hi: np.ndarray,
-) -> tuple[int, int]:
-    """First sample whose base pose ``states[i]`` = (x, y, theta) puts the robot, whose points
-    ``local`` (n, 3) are given in the base frame at the nominal base pose (bx, by, btheta), into
-    an obstacle: :func:`rigid_clearances` then :func:`rigid_first_hit`."""
-    grid = (field, lattice, resolution, half_diagonal, grid_lo, grid_hi)
-    wx, wy, clear, radius, least = rigid_clearances(local, bx, by, btheta, lo, hi, margin, *grid)
-    return rigid_first_hit(np.ascontiguousarray(local[:, 2]), wx, wy, clear, radius, least, bx, by, btheta,
-                           states, lo, hi, margin, *grid)
