@@ -39,13 +39,16 @@ class StartModelling(ExploreBehaviour):
               "(thesis Table 4.5: n_s is where it first did, c_a(30) after the budget)"),
     )
 
-    def _fallback(self, robot: Any) -> str | None:
-        """The fallback view generator's name (see the ``fallback`` parameter)."""
+    def _fallback(self, robot: Any, registry: Any) -> str | None:
+        """The fallback view generator's name (see the ``fallback`` parameter); an unknown one is bad input."""
         name = self.p["fallback"]
         if name == "auto":
             fixed_arm = robot.has(Capability.ARM) and not robot.has(Capability.MOBILE_BASE)
             return "reachable" if fixed_arm else "sphere"
-        return None if name in ("", "none") else name
+        if name in ("", "none"):
+            return None
+        registry.get("view_generator", name, self.name, "fallback")
+        return name
 
     def work(self) -> Outcome:
         from explore.nbv import ModellingSession
@@ -65,7 +68,7 @@ class StartModelling(ExploreBehaviour):
             planner=(config.planner, config.scoped("planner")),
             noise=self.p["noise"],
             max_plan_attempts=self.p["max_plan_attempts"],
-            fallback_generator=self._fallback(ctx.sim.robot),
+            fallback_generator=self._fallback(ctx.sim.robot, ctx.registry),
             continue_after_stop=self.p["continue_after_stop"],
         )
         ctx.state["modelling"] = ModellingOutputs(session, strategy_name, ctx)
