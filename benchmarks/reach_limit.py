@@ -54,20 +54,13 @@ def sample_configurations(robot: Any, centre: np.ndarray, n: int, base_radius: f
 
 
 def visible_from(pose: np.ndarray, points: np.ndarray, normals: np.ndarray, sensor: Any, raycaster: Any,
-                 axis: np.ndarray, half_angle: float, tolerance: float = 5e-4) -> np.ndarray:
+                 axis: np.ndarray, half_angle: float) -> np.ndarray:
     """(n,) True where a sample is seen from the sensor pose ``pose`` (world_T_sensor), see the module."""
-    eye = pose[:3, 3]
-    ray = points - eye
-    dist = np.linalg.norm(ray, axis=1)
-    direction = ray / np.maximum(dist, 1e-12)[:, None]
-    in_cone = direction @ (pose[:3, :3] @ axis) >= math.cos(half_angle)
-    facing = -np.einsum("ij,ij->i", direction, normals) >= math.cos(math.radians(float(sensor.max_incidence_deg)))
-    ok = np.flatnonzero(in_cone & facing & (dist >= sensor.min_range) & (dist <= sensor.max_range))
-    seen = np.zeros(len(points), dtype=bool)
-    if len(ok):
-        t_hit, _, _ = raycaster.cast(np.broadcast_to(eye, (len(ok), 3)), direction[ok])
-        seen[ok[np.asarray(t_hit) >= dist[ok] - tolerance]] = True
-    return seen
+    from explore.mapping import seen_from
+
+    return seen_from(pose[:3, 3], points, normals, raycaster, sensor.min_range, sensor.max_range,
+                     math.cos(math.radians(float(sensor.max_incidence_deg))),
+                     cone=(pose[:3, :3] @ axis, math.cos(half_angle)))
 
 
 class _Viewer:

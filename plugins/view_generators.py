@@ -39,14 +39,31 @@ def sweep_target(ctx: PlanningContext, pose: Array, path_length: float) -> Any:
     return clip_above(target, ctx.lowest_sensor_z)  # objects cannot be viewed from below
 
 
+class _OncePerRun(ViewGenerator):
+    """A fixed search space: its candidates are made once per run and never dropped as stale."""
+
+    persistent = True
+
+    def reset(self) -> None:
+        self._done = False
+
+    def generate(self, ctx: PlanningContext) -> list[Candidate]:
+        if self._done:
+            return []
+        self._done = True
+        return self.candidates(ctx)
+
+    def candidates(self, ctx: PlanningContext) -> list[Candidate]:
+        raise NotImplementedError
+
+
 # ---------------------------------------------------------------------------------------
 # sphere
 # ---------------------------------------------------------------------------------------
-class Sphere(ViewGenerator):
+class Sphere(_OncePerRun):
     """Fixed search space around the region: inclination x azimuth grid of scan paths, or N views."""
 
     name = "sphere"
-    persistent = True
     params = (
         Param("n_inclination", int, 9, "", "inclination steps of the path grid (thesis: 9 x 9 = 81 paths)", low=1),
         Param("n_azimuth", int, 9, "", "azimuth steps of the path grid", low=1),
@@ -57,9 +74,6 @@ class Sphere(ViewGenerator):
         Param("path_length", float, 0.3, "m", "scan path length (thesis: ~300 mm, covers the object)", low=0.01),
         Param("lines", bool, True, "", "paths for line sensors (False: single views on a dome)"),
     )
-
-    def reset(self) -> None:
-        self._done = False
 
     def views(self, ctx: PlanningContext) -> list[tuple[Array, Array]]:
         """(eye, view direction) pairs of the search space."""
@@ -80,10 +94,7 @@ class Sphere(ViewGenerator):
             out = [(centre + radius * d, -d) for d in dirs]
         return out
 
-    def generate(self, ctx: PlanningContext) -> list[Candidate]:
-        if self._done:
-            return []
-        self._done = True
+    def candidates(self, ctx: PlanningContext) -> list[Candidate]:
         out = []
         for index, (eye, view) in enumerate(self.views(ctx)):
             pose = frame_from(view, any_sweep(view), eye)
@@ -131,7 +142,7 @@ class RandomViews(ViewGenerator):
 # ---------------------------------------------------------------------------------------
 # reachable views
 # ---------------------------------------------------------------------------------------
-class ReachableViews(ViewGenerator):
+class ReachableViews(_OncePerRun):
     """Views the robot can take: sensor poses of random configurations within its joint limits that
     look at the region at the sensor's optimal distance, spread over positions and directions.
 
@@ -144,7 +155,6 @@ class ReachableViews(ViewGenerator):
     """
 
     name = "reachable"
-    persistent = True
     params = (
         Param("samples", int, 20000, "", "random configurations tried", low=1),
         Param("count", int, 243, "", "candidates kept, spread over positions and view directions", low=1),
@@ -152,9 +162,6 @@ class ReachableViews(ViewGenerator):
         Param("direction_weight", float, 0.2, "m/rad", "metres a radian of view direction counts as when "
               "spreading the candidates", low=0.0),
     )
-
-    def reset(self) -> None:
-        self._done = False
 
     def poses(self, ctx: PlanningContext) -> np.ndarray:
         """(n, 4, 4) sensor poses of random configurations whose optical axis meets the region at the
@@ -170,10 +177,7 @@ class ReachableViews(ViewGenerator):
         inside &= ~in_environment_boxes(ctx, poses[:, :3, 3])
         return poses[inside]
 
-    def generate(self, ctx: PlanningContext) -> list[Candidate]:
-        if self._done:
-            return []
-        self._done = True
+    def candidates(self, ctx: PlanningContext) -> list[Candidate]:
         poses = self.poses(ctx)
         if len(poses) == 0:
             return []

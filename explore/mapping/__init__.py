@@ -24,6 +24,7 @@ from explore.mapping.metrics import (
     path_length,
     rms_error,
     sample_surface,
+    seen_from,
 )
 from explore.mapping.pvs import PVS
 from explore.mapping.pvs_grid import FREE, OCCUPIED, THRESHOLDS, UNKNOWN, check_grid, entropy_bits, logit
@@ -97,6 +98,7 @@ __all__ = [
     "path_length",
     "rms_error",
     "sample_surface",
+    "seen_from",
     "trace",
     "traverse",
     "vertex_normals_of",

@@ -37,6 +37,7 @@ __all__ = [
     "path_length",
     "rms_error",
     "sample_surface",
+    "seen_from",
     "view_sphere",
 ]
 
@@ -166,21 +167,35 @@ def observable_surface(
         todo = np.flatnonzero(~visible)
         if len(todo) == 0:
             break
-        ray = points[todo] - eye
-        dist = np.linalg.norm(ray, axis=1)
-        direction = ray / np.maximum(dist, 1e-12)[:, None]
-        cos = -np.einsum("ij,ij->i", direction, normals[todo])
-        if one_sided == 0:  # orientation unknown: both sides of a triangle may be seen
-            cos = np.abs(cos)
-        ok = (dist >= min_range) & (dist <= max_range) & (cos >= cos_limit)
-        todo, dist, direction = todo[ok], dist[ok], direction[ok]
-        if len(todo) == 0:
-            continue
-        t_hit, _, _ = raycaster.cast(np.broadcast_to(eye, direction.shape), direction)
-        visible[todo[t_hit >= dist - tolerance]] = True
+        visible[todo[seen_from(eye, points[todo], normals[todo], raycaster, min_range, max_range, cos_limit,
+                               both_sides=one_sided == 0, tolerance=tolerance)]] = True
     if return_normals:
         return points[visible], normals[visible]
     return points[visible]
+
+
+def seen_from(eye: Array, points: Points3, normals: Points3, raycaster: RayCaster, min_range: float,
+              max_range: float, cos_limit: float, both_sides: bool = False, tolerance: float = 5e-4,
+              cone: tuple[Array, float] | None = None) -> Array:
+    """(n,) True where a surface sample is seen from ``eye``: its distance in [min_range, max_range], its
+    normal facing the eye within the incidence limit (cos >= ``cos_limit``; either side with
+    ``both_sides``), inside ``cone`` = (unit axis, cos of the half angle) if given, and the first hit along
+    the line of sight is the sample itself (within ``tolerance``)."""
+    ray = points - eye
+    dist = np.linalg.norm(ray, axis=1)
+    direction = ray / np.maximum(dist, 1e-12)[:, None]
+    cos = -np.einsum("ij,ij->i", direction, normals)
+    if both_sides:  # orientation unknown: both sides of a triangle may be seen
+        cos = np.abs(cos)
+    ok = (dist >= min_range) & (dist <= max_range) & (cos >= cos_limit)
+    if cone is not None:
+        ok &= direction @ np.asarray(cone[0]) >= cone[1]
+    seen = np.zeros(len(points), dtype=bool)
+    todo = np.flatnonzero(ok)
+    if len(todo):
+        t_hit, _, _ = raycaster.cast(np.broadcast_to(eye, (len(todo), 3)), direction[todo])
+        seen[todo[np.asarray(t_hit) >= dist[todo] - tolerance]] = True
+    return seen
 
 
 def covered(reconstructed: Points3, observable: Points3, tau: float = 0.003) -> Array:

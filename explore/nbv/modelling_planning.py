@@ -25,7 +25,7 @@ class CandidatePlanning:
         Candidates the robot surely cannot reach (capability map of a fixed-base arm, see
         :class:`explore.nbv.scan_planning.CapabilityMap`) are left out before they are scored.
         """
-        keep = ("sphere",) if getattr(self.generator, "persistent", False) else ()
+        keep = (self.generator.name,) if getattr(self.generator, "persistent", False) else ()
         self.stack.drop_stale(self.ctx.iteration, self.ctx.executed, keep_sources=keep)
         new = [c for c in self.generator.generate(self.ctx)
                if not any(self.stack._similar(c.pose, pose) for pose in self.ctx.executed)
