@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from explore.core import BadInput
+from explore.core import BadInput, check_path_name
 
 from .output import JsonOption, print_json, print_rows
 
@@ -82,7 +82,7 @@ def register(app: typer.Typer) -> None:
 
         if not math.isfinite(scale) or scale <= 0:
             raise BadInput("--scale", None, f"{scale} must be a positive number")
-        if not mesh.is_file():
+        if not check_path_name(mesh).is_file():
             raise BadInput(str(mesh), None, "no such mesh file")
         try:
             loaded = read_mesh(mesh)
@@ -91,6 +91,7 @@ def register(app: typer.Typer) -> None:
         loaded = TriMesh(loaded.vertices * scale, loaded.triangles)
         stored = {}
         with _open(db, create=True) as database:
+            database.check_name(name)
             if name in database and not replace:
                 raise BadInput(str(database.path), name,
                                "an object of this name exists (use --replace to overwrite it)")

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.api import Executor
-from explore.core import BadInput, Param, captured_output
+from explore.core import BadInput, Param, captured_output, check_path_name
 from explore.runtime import OnDone, RunSpec, run_isolated, run_local
 
 
@@ -101,6 +101,11 @@ class RayExecutor(Executor):
     def check(self) -> None:
         """Connect before any run starts: an unreachable head or a refused token is one line (exit 2)."""
         options: dict[str, Any] = {"log_to_driver": False, "configure_logging": False}
+        if self.token_file:
+            token = check_path_name(self.token_file, "--ray-token-file")
+            if not token.is_file() or not token.read_text(encoding="utf-8", errors="replace").strip():
+                raise BadInput("--ray-token-file", self.token_file, "no such file, or it is empty")
+            os.environ["RAY_AUTH_TOKEN_PATH"] = str(token.resolve())
         if not self.address:
             import ray
 
@@ -109,11 +114,6 @@ class RayExecutor(Executor):
                     ray.init(num_cpus=self.jobs, include_dashboard=False, **options)
                 self._started_here = True
             return
-        if self.token_file:
-            token = Path(self.token_file)
-            if not token.is_file() or not token.read_text(encoding="utf-8", errors="replace").strip():
-                raise BadInput("--ray-token-file", self.token_file, "no such file, or it is empty")
-            os.environ["RAY_AUTH_TOKEN_PATH"] = str(token.resolve())
         if self.address != "auto":
             _reach(self.address)
         if _ray_token_given():

@@ -79,7 +79,8 @@ def sandbox(tmp_path, monkeypatch):
     mesh.write_text("v 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nv 0 0 0.05\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
     monkeypatch.chdir(work)
     monkeypatch.setenv("EXPLORE_DB", str(work / "default.db"))
-    return {"tmp": str(work), "bad": str(BAD), "file": str(work / "existing.txt"), "db": str(db), "mesh": str(mesh)}
+    return {"tmp": str(work), "bad": str(BAD), "file": str(work / "existing.txt"), "db": str(db), "mesh": str(mesh),
+            "long": "y" * 300}
 
 
 def _main(argv: list[str], capfd) -> tuple[int, list[str], str]:

@@ -30,7 +30,7 @@ from explore.core.params import Param, parse_assignment, validate_params
 from explore.core.pictures import equal_axes, plt, save_curves_png, save_mesh_png, save_points_png
 from explore.core.plugin import Plugin
 from explore.core.typed import Array, Points3, Pose
-from explore.core.user_files import load_yaml, read_text
+from explore.core.user_files import check_path_name, load_yaml, read_text
 
 __all__ = [
     "Array",
@@ -55,6 +55,7 @@ __all__ = [
     "brief",
     "captured_output",
     "check_output",
+    "check_path_name",
     "equal_axes",
     "fibonacci_sphere",
     "invert",

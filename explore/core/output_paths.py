@@ -7,8 +7,7 @@ import tempfile
 from pathlib import Path
 
 from explore.core.errors import BadInput
-
-NAME_MAX = 255
+from explore.core.user_files import check_path_name
 
 
 def check_output(path: str | Path, option: str, folder: bool = False, suffixes: tuple[str, ...] = ()) -> Path:
@@ -21,10 +20,7 @@ def check_output(path: str | Path, option: str, folder: bool = False, suffixes: 
     report wrongly for root). Missing parent folders are fine: they are created when written.
     """
     text = str(path)
-    path = Path(text)
-    too_long = next((part for part in path.parts if len(part.encode()) > NAME_MAX), None)
-    if too_long is not None:
-        raise BadInput(option, text[:60] + "…", f"a name longer than {NAME_MAX} bytes")
+    path = check_path_name(text, option)
     if not text.strip() or path.resolve() == Path.cwd().resolve():
         raise BadInput(option, None, "empty, or the current folder: name a file or a new folder")
     if folder and path.exists() and not path.is_dir():

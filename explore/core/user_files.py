@@ -18,6 +18,21 @@ from explore.core.errors import BadInput
 
 MAX_BYTES = 8 * 2**20
 MAX_NODES = 100_000  # nodes of the document with every alias expanded
+NAME_MAX = 255  # bytes of one path component (Linux, macOS)
+
+
+def check_path_name(path: str | Path, option: str | None = None) -> Path:
+    """``path`` if no component is longer than the file system allows.
+
+    ``Path.is_file`` raises (instead of answering False) for such a name, so every lookup of a
+    user's file or name (world, tree, mesh, database, output) checks it first.
+    """
+    text = str(path)
+    if any(len(part.encode()) > NAME_MAX for part in Path(text).parts):
+        shown = text[:60] + "…"
+        file, where = (option, shown) if option else (shown, None)
+        raise BadInput(file, where, f"a name longer than {NAME_MAX} bytes")
+    return Path(text)
 
 
 def read_text(path: str | Path) -> str:

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import BadInput, Pose
+from explore.core import BadInput, Pose, brief, check_path_name
 from explore.perception.database_files import (
     APPLICATION_ID,
     BUSY_TIMEOUT_S,
@@ -115,7 +115,7 @@ class ObjectDatabase:
         Raises BadInput for a missing file (``create=False`` or ``readonly``), a non-SQLite or
         corrupted file, a foreign SQLite database or a newer schema; such files are never modified.
         """
-        path = Path(path).expanduser()
+        path = check_path_name(path).expanduser()
         if path.exists() and path.is_dir():
             raise BadInput(str(path), None, "is a folder, expected an explore object database file")
         if not path.exists():
@@ -214,6 +214,10 @@ class ObjectDatabase:
         self.close()
 
     # -- objects -------------------------------------------------------------------------
+    def check_name(self, name: str) -> None:
+        """BadInput unless ``name`` is a valid object name (callers check before costly work)."""
+        _check_name(self.path, name)
+
     def add(
         self,
         name: str,
@@ -230,7 +234,7 @@ class ObjectDatabase:
 
         ``descriptors`` maps a kind to an array or to ``(array, params)``.
         """
-        _check_name(self.path, name)
+        self.check_name(name)
         if provenance not in PROVENANCES:
             raise BadInput(str(self.path), "provenance", f"{provenance!r} is not one of {list(PROVENANCES)}")
         vertices = np.asarray(mesh.vertices, dtype=float)
@@ -441,7 +445,8 @@ def _now() -> str:
 
 def _check_name(path: Path, name: str) -> None:
     if not isinstance(name, str) or not _NAME.match(name):
-        raise BadInput(str(path), "name", f"{name!r} is not a valid object name (letters, digits, _ . -)")
+        raise BadInput(str(path), "name",
+                       f"{brief(name)} is not a valid object name (up to 100 letters, digits, _ . -)")
 
 
 def _put_descriptor(con: sqlite3.Connection, object_id: int, kind: str, array: np.ndarray,

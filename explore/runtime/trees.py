@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from explore.core import BadInput, brief, load_yaml, valid_names, validate_params
+from explore.core import BadInput, brief, check_path_name, load_yaml, valid_names, validate_params
 from explore.runtime.decorators import RepeatUntil
 from explore.sim import repo_root
 
@@ -98,7 +98,7 @@ def tree_search_path() -> list[Path]:
 
 def find_tree(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
     """Resolve a tree given as a path (absolute, or relative to an including file) or a name."""
-    candidate = Path(name_or_path)
+    candidate = check_path_name(name_or_path)
     bases = ([relative_to] if relative_to else []) + [Path.cwd()]
     for base in bases:
         path = candidate if candidate.is_absolute() else base / candidate
@@ -136,8 +136,13 @@ def load_tree(name_or_path: str | Path, registry: Any, _stack: tuple[Path, ...] 
         raise BadInput(file, unknown[0], "unknown field (valid: name, description, root)")
     if "root" not in data:
         raise BadInput(file, "root", "missing")
+    for key in ("name", "description"):
+        if data.get(key) is not None and not isinstance(data[key], str):
+            raise BadInput(file, key, f"expected text, got {brief(data[key])}")
     root = _parse(data["root"], file, "root", registry, (*_stack, path))
-    return TreeFile(path, str(data.get("name", path.stem)), str(data.get("description", "") or ""), root)
+    if not _stack:
+        _check_blackboard_keys(root, registry)
+    return TreeFile(path, data.get("name") or path.stem, data.get("description") or "", root)
 
 
 def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, ...]) -> Node:
@@ -185,7 +190,9 @@ def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, .
         if data.get("name"):
             node.name = str(data["name"])
         return node
-    name = data[kind] if isinstance(data[kind], str) else kind.replace("_", " ")
+    if data[kind] is not None and not isinstance(data[kind], str):
+        raise BadInput(file, f"{where}.{kind}", f"expected the node's name (text, or empty), got {brief(data[kind])}")
+    name = data[kind] or kind.replace("_", " ")
     attrs = {k: v for k, v in data.items() if k not in (kind, "children", "child")}
     _check_values(kind, attrs, file, where)
     if kind in COMPOSITES:
@@ -197,6 +204,31 @@ def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, .
             raise BadInput(file, f"{where}.child", f"a {kind} node needs 'child'")
         children = [_parse(data["child"], file, f"{where}.child", registry, stack)]
     return Node(kind, name, attrs, children, None, {}, file, where)
+
+
+def _check_blackboard_keys(root: Node, registry: Any) -> None:
+    """Every key a loop reads (``until``, ``items``) must be written by a behaviour of the tree or
+    a ``for_each``'s ``as``: a misspelt flag would otherwise loop until its budget runs out.
+
+    Checked only when every behaviour declares what it writes (``writes`` of the base class);
+    a behaviour that registers blackboard keys on its own could write anything.
+    """
+    from explore.runtime.behaviour import ExploreBehaviour
+
+    written: set[str] = set()
+    for node in root.walk():
+        if node.type == "behaviour":
+            factory = registry.get("behaviour", node.behaviour).factory
+            if not (isinstance(factory, type) and issubclass(factory, ExploreBehaviour)):
+                return
+            written.update(factory.writes)
+        elif node.type == "for_each":
+            written.add(node.attrs["as"])
+    for node in root.walk():
+        for key in ("until", "items"):
+            if key in node.attrs and node.attrs[key] not in written:
+                raise BadInput(node.source, f"{node.path}.{key}", f"no behaviour of the tree writes "
+                               f"{brief(node.attrs[key])} (written: {', '.join(sorted(written)) or 'nothing'})")
 
 
 def _check_values(kind: str, attrs: dict[str, Any], file: str, where: str) -> None:

@@ -3,6 +3,7 @@ short, stable name (<world>-<n>) and its provenance, and every recognised object
 
 from __future__ import annotations
 
+import re
 import time
 from typing import TYPE_CHECKING
 
@@ -57,7 +58,8 @@ class DatabaseUpdate:
         """A short, stable name for a modelled object: ``<world>-<n>``, the first n free in the database
         (the run that made it is recorded beside it, not in its name)."""
         scene = self.scene
-        stem = "".join(ch if ch.isalnum() or ch in "_.-" else "_" for ch in scene.sim.spec.name)
+        # an object name is ASCII letters, digits, _ . - (up to 100), not starting with a dot
+        stem = re.sub(r"[^A-Za-z0-9_.\-]", "_", scene.sim.spec.name)[:80].lstrip(".") or "world"
         k = 1
         while f"{stem}-{k}" in scene.db:
             k += 1

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, BadInput, brief, load_yaml
+from explore.core import Array, BadInput, brief, check_path_name, load_yaml
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
 TOP_LEVEL_FIELDS = ("name", "description", "environment", "objects", "region", "robot", "sensor", "overview")
@@ -89,7 +89,7 @@ def world_search_path() -> list[Path]:
 
 def find_world(name_or_path: str | Path) -> Path:
     """Resolve a world given as a path or as a name in the world search path."""
-    candidate = Path(name_or_path)
+    candidate = check_path_name(name_or_path)
     if candidate.suffix in (".yaml", ".yml") and candidate.is_file():
         return candidate
     for folder in world_search_path():
@@ -107,6 +107,9 @@ def list_worlds() -> list[Path]:
         for path in sorted(folder.glob("*.yaml")):
             seen.setdefault(path.stem, path)
     return list(seen.values())
+
+
+WORLD_LIMIT = 1e4  # the largest magnitude of any number in a world file
 
 
 class _Fields:
@@ -154,6 +157,8 @@ class _Fields:
             raise BadInput(self.source, where, f"expected a number, got {brief(value)}")
         if not math.isfinite(value):
             raise BadInput(self.source, where, f"{value} is not a finite number")
+        if abs(value) > WORLD_LIMIT:  # pybullet and the voxel indices overflow long before inf
+            raise BadInput(self.source, where, f"{brief(value)} is beyond ±{WORLD_LIMIT:g} (metres, degrees)")
         return float(value)
 
     def string(self, key: str, default: Any = ...) -> str:
@@ -180,7 +185,11 @@ def resolve_source(source: str, world_dir: Path, where: str, file: str) -> Path:
     """A mesh/URDF path: beside the world file first, then in pybullet_data."""
     for base in (world_dir, pybullet_data_path()):
         path = (base / source).resolve()
-        if path.is_file():
+        try:
+            found = path.is_file()
+        except OSError as error:  # e.g. a name longer than the file system allows
+            raise BadInput(file, where, f"cannot use {brief(source)}: {error.strerror or error}") from None
+        if found:
             if path.suffix.lower() not in BODY_SUFFIXES:
                 raise BadInput(file, where, f"unsupported file type {path.suffix!r} (use {', '.join(BODY_SUFFIXES)})")
             return path
