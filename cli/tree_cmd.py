@@ -37,7 +37,8 @@ def register(app: typer.Typer) -> None:
     @sub.command("show")
     def show(
         tree: Annotated[str, typer.Argument(help="Tree name or file.")],
-        format: Annotated[str, typer.Option("--format", "-f", help="unicode, dot or png.")] = "unicode",
+        format: Annotated[str | None, typer.Option(
+            "--format", "-f", help="unicode, dot or png (default: from the --out suffix, else unicode).")] = None,
         out: Annotated[Path | None, typer.Option(
             "--out", "-o", help="File for dot or png output (png: runs/TREE.png, dot: stdout by default).")] = None,
     ) -> None:
@@ -48,8 +49,13 @@ def register(app: typer.Typer) -> None:
 
         from .main import console
 
+        if format is None:
+            format = out.suffix.lower().lstrip(".") if out is not None and out.suffix.lower() in (".dot", ".png") \
+                else "unicode"
         if format not in ("unicode", "dot", "png"):
             raise BadInput("--format", None, f"expected unicode, dot or png, got {format!r}")
+        if format == "unicode" and out is not None:
+            raise BadInput("--out", str(out), "the unicode tree is printed; write a file with a .dot or .png --out")
         parsed, reg = _load(tree)
         root = build(parsed.root, reg)
         if format == "unicode":

@@ -53,7 +53,7 @@ class DepthCamera(RaySensor):
         Param("fov_deg", float, 58.0, "deg", "horizontal field of view", low=1.0, high=170.0),
         Param("min_range", float, 0.3, "m", "closest measurable range", low=0.0),
         Param("max_range", float, 3.5, "m", "farthest measurable range", low=0.01),
-        Param("subsample", int, 1, "px", "keep every n-th pixel row and column", low=1),
+        Param("subsample", int, 1, "px", "keep every n-th pixel row and column", low=1, high=1024),
         Param("noise", str, "kinect", "", "range noise model", choices=NOISE_MODELS),
         Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0),
         Param("max_incidence_deg", float, 85.0, "deg", "no return beyond this incidence angle", low=0.0, high=90.0),
@@ -67,7 +67,7 @@ class DepthCamera(RaySensor):
         Param("baseline", float, 0.075, "m", "projector to camera distance along the camera's x axis", low=1e-4),
         Param("disparity_step", float, 0.0, "px", "disparity quantisation step (Kinect: 0.125; 0: none)", low=0.0),
         Param("disparity_width", int, 0, "px", "width of the image the device matches disparities in (Kinect: 640; "
-              "0: this image's), which sets the focal length of the quantisation", low=0),
+              "0: this image's), which sets the focal length of the quantisation", low=0, high=8192),
         Param("projector_shadow", bool, False, "", "no return where the projector does not light the surface"),
         Param("flying_pixels", float, 0.0, "", "probability of a mixed depth on a depth discontinuity",
               low=0.0, high=1.0),
@@ -75,7 +75,7 @@ class DepthCamera(RaySensor):
         Param("bias_sigma", float, 0.0, "", "low-frequency per-frame depth bias, in units of sigma(d)", low=0.0),
         Param("patch_sigma", float, 0.0, "", "correlated depth noise in patches, in units of sigma(d)", low=0.0),
         Param("patch_px", float, 2.0, "px", "correlation length of the patches (Gaussian sigma, full-resolution "
-              "pixels)", low=0.1),
+              "pixels)", low=0.1, high=1000.0),
     )
 
     def __init__(self, **values: object) -> None:
@@ -206,7 +206,7 @@ class LaserStriper(RaySensor):
     params = (
         Param("profile", str, "ideal", "", "a device's artefacts at once (parameters given beside it win)",
               choices=tuple(_STRIPER_PROFILES), presets=_STRIPER_PROFILES),
-        Param("beams_per_stripe", int, 224, "", "beams per stripe", low=2),
+        Param("beams_per_stripe", int, 224, "", "beams per stripe", low=2, high=65536),
         Param("fan_deg", float, 24.0, "deg", "fan angle of the stripe (~14 cm wide at 325 mm)", low=0.1, high=170.0),
         Param("min_range", float, 0.15, "m", "near end of the depth of field", low=0.0),
         Param("max_range", float, 0.5, "m", "far end of the depth of field", low=0.01),
@@ -223,7 +223,7 @@ class LaserStriper(RaySensor):
         Param("camera_shadow", bool, False, "", "no return where the camera does not see the laser line"),
         Param("speckle_sigma", float, 0.0, "", "speckle noise along the stripe, in units of sigma(d)", low=0.0),
         Param("speckle_beams", float, 2.0, "", "correlation length of the speckle along the stripe (beams)",
-              low=0.1),
+              low=0.1, high=10000.0),
     )
 
     def __init__(self, **values: object) -> None:

@@ -81,14 +81,17 @@ class VasquezEU(StrategyPlugin):
                                  {"base": "area_factor", "k": int(k), **utility_params}, dict(termination_params))
 
 
-#: the stop calibrated on the broad object set (issue 20, docs/results.md): ĉ_m 94 %, or 85 % once
-#: boundary search / hole rescan has nothing left (below that the session's fallback views go on)
-CALIBRATED_TERMINATION = {"coverage": 0.94, "exhausted_coverage": 0.85, "density": 0.2, "n_abort": 30}
+#: the stop calibrated on the broad object set (issue 20, docs/results.md, benchmarks/calibrate_stop.py):
+#: ĉ_m 94 %, or 85 % once boundary search / hole rescan has nothing left (below that the session's
+#: fallback views go on), or ĉ_m without the support opening 99 % once a fallback view was scanned
+CALIBRATED_TERMINATION = {"coverage": 0.94, "exhausted_coverage": 0.85, "off_support_coverage": 0.99, "density": 0.2,
+                          "n_abort": 30}
 
 EXTRA = [
     make_strategy("ig_quality/bs_hr_calibrated",
                   "Thesis IG/Quality over BS/HR candidates with the stop calibrated on the broad object set: "
-                  "ĉ_m 94 %, or 85 % when BS/HR has no candidate left (c_a at the stop >= 97 % on every object).",
+                  "ĉ_m 94 %, or 85 % when BS/HR has no candidate left, or 99 % without the support opening after "
+                  "a fallback view (c_a at the stop >= 97 % on every object).",
                   "boundary_hole", "ig_quality", "coverage_target", {}, {"omega": -1.0}, dict(CALIBRATED_TERMINATION)),
     make_strategy("vasquez/du", "Vasquez-Gomez deterministic utility (pos reg sur dist) over random views.",
                   "random", "area_factor", "unknown_below", {"count": 40}),

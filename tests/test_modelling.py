@@ -62,14 +62,18 @@ def test_terminations(registry) -> None:  # noqa: ANN001
     ctx.exhausted = True  # the strategy's generator had nothing; a fallback's candidates fill the stack
     assert none_left.decide(ctx).stop
     ctx.exhausted = False
-    # the calibrated stop: ĉ_m 94 %, or 85 % when boundary search / hole rescan has nothing left
+    # the calibrated stop: ĉ_m 94 %, or 85 % when boundary search / hole rescan has nothing left, or
+    # 99 % without the support opening once a fallback view was scanned
     calibrated = registry.create("strategy", "ig_quality/bs_hr_calibrated").strategy.build(registry)[2]
-    for history, exhausted, stop in [([0.8, 0.86], False, False), ([0.8, 0.86], True, True),
-                                     ([0.8, 0.84], True, False), ([0.9, 0.941], False, True)]:
+    for history, exhausted, off_support, fallback_scans, stop in [
+            ([0.8, 0.86], False, 0.95, 0, False), ([0.8, 0.86], True, 0.95, 0, True),
+            ([0.8, 0.84], True, 0.95, 0, False), ([0.9, 0.941], False, 0.95, 0, True),
+            ([0.6, 0.6], True, 0.995, 0, False), ([0.6, 0.6], True, 0.995, 1, True),
+            ([0.6, 0.6], True, 0.985, 2, False)]:
         ctx = ctx_with(history)
-        ctx.exhausted = exhausted
+        ctx.exhausted, ctx.off_support_history, ctx.fallback_scans = exhausted, [off_support], fallback_scans
         decision = calibrated.decide(ctx)
-        assert decision.stop == stop, (history, exhausted, decision)
+        assert decision.stop == stop, (history, exhausted, off_support, fallback_scans, decision)
         assert not stop or decision.outcome == "success"
     below = registry.create("termination", "unknown_below", {"threshold": 30})
     ctx.best_diagnostics = {"unknown_first": 12.0}

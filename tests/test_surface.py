@@ -55,6 +55,22 @@ def test_box_without_top_face() -> None:
     assert hole.radius == pytest.approx(np.sqrt(0.5))
 
 
+def test_the_opening_on_the_support_is_not_a_hole_off_support() -> None:
+    """A box standing on z = -0.5 without its bottom face: the bottom is where it stands, so
+    without the support opening ĉ_m is 1; an opening higher up still counts."""
+    box = box_mesh(np.ones(3))
+    face_z = box.vertices[box.triangles][:, :, 2]
+    bottom = np.all(face_z < -0.49, axis=1)
+    tris = box.triangles[~bottom]
+    assert coverage_area(box.vertices, tris) == pytest.approx(5.0 / 6.0, abs=1e-12)
+    assert coverage_area(box.vertices, tris, support_z=-0.5) == 1.0
+    # within the margin (a sensor does not see the last millimetres) it is; 2 cm above it is not
+    assert coverage_area(box.vertices, tris, support_z=-0.505) == 1.0
+    assert coverage_area(box.vertices, tris, support_z=-0.52) == pytest.approx(5.0 / 6.0, abs=1e-12)
+    top = np.all(face_z > 0.49, axis=1)
+    assert coverage_area(box.vertices, box.triangles[~top], support_z=-0.5) == pytest.approx(5.0 / 6.0, abs=1e-12)
+
+
 def test_hole_fan_area_of_a_planar_polygon() -> None:
     angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     ring = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(12)])

@@ -10,6 +10,9 @@ import numpy as np
 
 from explore.core import Array, Points3
 
+#: a hole lying wholly this close above the support plane is where the object stands (m); as
+#: boundary search's ``floor_margin``, about the height a sensor cannot see next to the support
+SUPPORT_MARGIN = 0.012
 
 # ---------------------------------------------------------------------------------------
 # pure mesh functions (any TriMesh)
@@ -244,15 +247,22 @@ def holes_of(
     return out
 
 
-def coverage_area(vertices: Points3, triangles: np.ndarray, max_perimeter: float | None = None) -> float:
+def coverage_area(vertices: Points3, triangles: np.ndarray, max_perimeter: float | None = None,
+                  support_z: float | None = None, support_margin: float = SUPPORT_MARGIN) -> float:
     """ĉ_m = A_filled / (A_filled + A_empty) with A_empty = Σ hole fans (Eq. 4.35–4.37).
 
-    Every closed border loop counts as a hole (the opening at the support too, so 100 % is
-    out of reach for an object on a table); ``max_perimeter`` ignores larger loops.
+    Every closed border loop counts as a hole, as in the thesis: the opening where the object
+    stands on its support too, so 100 % is out of reach for an object on a table and the
+    estimate's bias grows with the contact area (38 points on a shallow dish). With
+    ``support_z`` a loop lying wholly within ``support_margin`` above that plane is the
+    contact, which no sensor can see, and is left out. ``max_perimeter`` ignores larger loops.
     """
     vertices = np.asarray(vertices, dtype=float)
     filled = float(_triangle_areas(vertices, np.asarray(triangles)).sum())
     if filled <= 0.0:
         return 0.0
-    empty = sum(h.area for h in holes_of(vertices, triangles, max_perimeter=max_perimeter))
+    holes = holes_of(vertices, triangles, max_perimeter=max_perimeter)
+    if support_z is not None:
+        holes = [h for h in holes if vertices[h.loop, 2].max() > support_z + support_margin]
+    empty = sum(h.area for h in holes)
     return filled / (filled + empty)

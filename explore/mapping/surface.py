@@ -387,10 +387,11 @@ class SurfaceModel(SurfaceFeatures):
         """ĉ_m = 1 − n_border / n_total (IROS Eq. 3)."""
         return coverage_border(self.mesh.triangles)
 
-    def coverage_area(self, max_perimeter: float | None = None) -> float:
-        """ĉ_m = A_filled / (A_filled + A_empty) with hole fans (Eq. 4.35–4.37)."""
+    def coverage_area(self, max_perimeter: float | None = None, support_z: float | None = None) -> float:
+        """ĉ_m = A_filled / (A_filled + A_empty) with hole fans (Eq. 4.35–4.37); with ``support_z`` the
+        opening where the object stands on that plane is not a hole (see ``mesh_holes.coverage_area``)."""
         mesh = self.mesh
-        return coverage_area(mesh.vertices, mesh.triangles, max_perimeter)
+        return coverage_area(mesh.vertices, mesh.triangles, max_perimeter, support_z)
 
     def mean_edge_length(self) -> float:
         """l̄_e of the current mesh (m)."""

@@ -147,6 +147,7 @@ class PlanningContext:
     executed : world_T_sensor poses of the scans taken (middle of the path)
     sensor_pose : current sensor pose
     coverage_history : ĉ_m after each scan
+    off_support_history : ĉ_m after each scan without the opening at the support (the region floor)
     density_history : d̄_m after each scan
     unknown_history : unknown voxels in the region after each scan
     mode : the generator mode ("boundary" or "hole" for boundary_hole)
@@ -169,6 +170,8 @@ class PlanningContext:
     executed: list[Pose] = field(default_factory=list)
     sensor_pose: Pose | None = None
     coverage_history: list[float] = field(default_factory=list)
+    off_support_history: list[float] = field(default_factory=list)
+    fallback_scans: int = 0  # scans of candidates from the session's fallback generator
     density_history: list[float] = field(default_factory=list)
     unknown_history: list[int] = field(default_factory=list)
     mode: str = "boundary"

@@ -305,6 +305,9 @@ class ModellingSession(Evaluation, CandidatePlanning):
         self.ctx.last_scan = scan
         coverage = float(self.surface.coverage_area())
         self.ctx.coverage_history.append(coverage)
+        off_support = float(self.surface.coverage_area(support_z=float(self.ctx.region_min[2])))
+        self.ctx.off_support_history.append(off_support)
+        self.ctx.fallback_scans += self._pending["source"].startswith("fallback_")
         self.ctx.density_history.append(float(self.surface.mean_density()))
         self.ctx.unknown_history.append(int(self.pvs.counts()["unknown"]))
         out["integrate_s"] = time.perf_counter() - start
@@ -313,6 +316,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
             index=self.n_scans, source=pending["source"], info=pending["info"], scan_length_m=pending["scan_length"],
             travel_m=pending["travel"], selection_s=pending["selection_s"], candidates=pending["candidates"],
             coverage_estimate=coverage, coverage_border=float(self.surface.coverage_border()),
+            coverage_off_support=off_support,
             density=self.ctx.density_history[-1], unknown_voxels=self.ctx.unknown_history[-1],
             decision=pending["decision"], reason=pending["reason"], score=pending["score"],
             margin=pending["margin"], termination_margin=pending["termination_margin"],

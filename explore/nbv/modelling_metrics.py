@@ -65,6 +65,7 @@ class Evaluation:
             **quality,
             "coverage_estimate": [r.coverage_estimate for r in self.records],
             "coverage_border": [r.coverage_border for r in self.records],
+            "coverage_off_support": [r.coverage_off_support for r in self.records],
             "density": [r.density for r in self.records],
             "scan_path_m": float(sum(r.scan_length_m for r in self.records)),
             "travel_m": float(sum(r.travel_m for r in self.records)),

@@ -22,6 +22,7 @@ class ScanRecord:
     candidates: int
     coverage_estimate: float
     coverage_border: float
+    coverage_off_support: float  # ĉ_m without the opening at the support (mesh_holes.coverage_area)
     density: float
     unknown_voxels: int
     decision: str = ""

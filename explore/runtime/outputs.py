@@ -206,9 +206,12 @@ class ModellingOutputs:
         files["pvs"], files["pvs_octomap"] = "pvs.npz", "pvs.bt"
         coverage = list(metrics.get("coverage") or [])
         estimate = list(metrics.get("coverage_estimate") or [])
+        off_support = list(metrics.get("coverage_off_support") or [])
         if estimate:
             x = np.arange(1, len(estimate) + 1)
             curves = {"ĉ_m (estimate)": (x, np.asarray(estimate))}
+            if off_support:
+                curves["ĉ_m without the support opening"] = (x, np.asarray(off_support))
             if coverage:
                 curves["c_a (ground truth)"] = (x[: len(coverage)], np.asarray(coverage))
             save_curves_png(curves, out_dir / "coverage.png", "scans", "coverage", self.strategy)
@@ -225,6 +228,7 @@ class ModellingOutputs:
             "coverage_per_scan": coverage,
             "coverage_estimate": estimate[-1] if estimate else None,
             "coverage_estimate_per_scan": estimate,
+            "coverage_off_support_per_scan": off_support,
             "density_per_scan": metrics.get("density"),
             "path_length_m": metrics.get("travel_m"),
             "scan_path_m": metrics.get("scan_path_m"),
