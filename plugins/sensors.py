@@ -187,6 +187,9 @@ class DepthCamera(RaySensor):
         return np.vstack(out).astype(np.uint8)
 
 
+#: closest spacing of a striper's stripes along its path (m); closer adds no surface, only beams
+MIN_STRIPE_SPACING = 1e-5
+
 _STRIPER_PROFILES = {
     "ideal": {},
     # a real triangulating striper: its camera beside the laser, speckle along the stripe
@@ -231,6 +234,9 @@ class LaserStriper(RaySensor):
             setattr(self, key, value)
         if self.max_range <= self.min_range:
             raise ValueError("max_range must exceed min_range")
+        if self.speed / self.rate_hz < MIN_STRIPE_SPACING:  # a 20 cm path would take millions of stripes
+            raise ValueError(f"stripes {self.speed / self.rate_hz:.2g} m apart (speed / rate_hz): "
+                             f"at least {MIN_STRIPE_SPACING:g} m")
         if self.grazing_from_deg > self.max_incidence_deg:
             self.grazing_from_deg = 90.0
         # a triangulation sensor never proves anything below its minimum range free
