@@ -248,21 +248,29 @@ def holes_of(
 
 
 def coverage_area(vertices: Points3, triangles: np.ndarray, max_perimeter: float | None = None,
-                  support_z: float | None = None, support_margin: float = SUPPORT_MARGIN) -> float:
+                  support_z: float | None = None) -> float:
     """ĉ_m = A_filled / (A_filled + A_empty) with A_empty = Σ hole fans (Eq. 4.35–4.37).
 
     Every closed border loop counts as a hole, as in the thesis: the opening where the object
     stands on its support too, so 100 % is out of reach for an object on a table and the
     estimate's bias grows with the contact area (38 points on a shallow dish). With
-    ``support_z`` a loop lying wholly within ``support_margin`` above that plane is the
-    contact, which no sensor can see, and is left out. ``max_perimeter`` ignores larger loops.
+    ``support_z`` the contact is left out (see :func:`coverage_areas`). ``max_perimeter``
+    ignores larger loops.
     """
+    return coverage_areas(vertices, triangles, support_z, max_perimeter)[0 if support_z is None else 1]
+
+
+def coverage_areas(vertices: Points3, triangles: np.ndarray, support_z: float | None,
+                   max_perimeter: float | None = None, support_margin: float = SUPPORT_MARGIN) -> tuple[float, float]:
+    """ĉ_m with every hole, and ĉ_m without the holes lying wholly within ``support_margin`` above
+    ``support_z`` (where the object stands: no sensor sees it), from one search for holes."""
     vertices = np.asarray(vertices, dtype=float)
     filled = float(_triangle_areas(vertices, np.asarray(triangles)).sum())
     if filled <= 0.0:
-        return 0.0
+        return 0.0, 0.0
     holes = holes_of(vertices, triangles, max_perimeter=max_perimeter)
+    empty = sum(h.area for h in holes)
     if support_z is not None:
         holes = [h for h in holes if vertices[h.loop, 2].max() > support_z + support_margin]
-    empty = sum(h.area for h in holes)
-    return filled / (filled + empty)
+    off_support = sum(h.area for h in holes)
+    return filled / (filled + empty), filled / (filled + off_support)

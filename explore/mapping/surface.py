@@ -35,6 +35,7 @@ from explore.mapping.mesh_holes import (
     border_edges,
     boundary_loops,
     coverage_area,
+    coverage_areas,
     coverage_border,
     holes_of,
     mesh_edge_lengths,
@@ -387,11 +388,16 @@ class SurfaceModel(SurfaceFeatures):
         """ĉ_m = 1 − n_border / n_total (IROS Eq. 3)."""
         return coverage_border(self.mesh.triangles)
 
-    def coverage_area(self, max_perimeter: float | None = None, support_z: float | None = None) -> float:
-        """ĉ_m = A_filled / (A_filled + A_empty) with hole fans (Eq. 4.35–4.37); with ``support_z`` the
-        opening where the object stands on that plane is not a hole (see ``mesh_holes.coverage_area``)."""
+    def coverage_area(self, max_perimeter: float | None = None) -> float:
+        """ĉ_m = A_filled / (A_filled + A_empty) with hole fans (Eq. 4.35–4.37)."""
         mesh = self.mesh
-        return coverage_area(mesh.vertices, mesh.triangles, max_perimeter, support_z)
+        return coverage_area(mesh.vertices, mesh.triangles, max_perimeter)
+
+    def coverage_areas(self, support_z: float) -> tuple[float, float]:
+        """ĉ_m, and ĉ_m without the opening where the object stands on the plane ``support_z``
+        (see ``mesh_holes.coverage_areas``)."""
+        mesh = self.mesh
+        return coverage_areas(mesh.vertices, mesh.triangles, support_z)
 
     def mean_edge_length(self) -> float:
         """l̄_e of the current mesh (m)."""

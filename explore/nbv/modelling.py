@@ -303,9 +303,8 @@ class ModellingSession(Evaluation, CandidatePlanning):
         self.point_history.append(np.array(self.surface.points, dtype=np.float32))
         self.ctx.iteration += 1
         self.ctx.last_scan = scan
-        coverage = float(self.surface.coverage_area())
+        coverage, off_support = self.surface.coverage_areas(support_z=float(self.ctx.region_min[2]))
         self.ctx.coverage_history.append(coverage)
-        off_support = float(self.surface.coverage_area(support_z=float(self.ctx.region_min[2])))
         self.ctx.off_support_history.append(off_support)
         self.ctx.fallback_scans += self._pending["source"].startswith("fallback_")
         self.ctx.density_history.append(float(self.surface.mean_density()))
