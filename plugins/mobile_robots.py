@@ -37,6 +37,8 @@ from .robot_parts import (
 if TYPE_CHECKING:
     from explore.sim import Simulation
 
+HEAD_HEIGHT = 0.08  # the pan-tilt head above the mast's top (m)
+
 
 class MobileManipulator(BulletRobot):
     """Planar base (x, y, theta; differential drive) carrying an arm with an eye-in-hand sensor."""
@@ -226,13 +228,17 @@ class MobileBase(BulletRobot):
         super().__init__(**values)
         self.weights = list(self.weights)[: self.dof]
         declare_laser(self)
+        lowest = self.ground_clearance + self.base_size[2] + HEAD_HEIGHT
+        if self.camera_height <= lowest:
+            raise ValueError(f"camera_height {self.camera_height:g} m leaves no mast: at least the base's "
+                             f"{lowest:.2f} m (ground clearance, base height and the {HEAD_HEIGHT} m head)")
 
     def attach(self, sim: Simulation) -> None:
         super().attach(sim)
         from explore.sim import box_mesh, cylinder_mesh, sphere_mesh
 
         size = np.asarray(self.base_size, dtype=float)
-        mast_len = self.camera_height - self.ground_clearance - size[2] - 0.08
+        mast_len = self.camera_height - self.ground_clearance - size[2] - HEAD_HEIGHT
         mast_center = [self.mast_offset, 0.0, size[2] + mast_len / 2.0]
         head = [self.mast_offset, 0.0, self.camera_height - self.ground_clearance]
         extra = [(p.GEOM_CYLINDER, [0.03, mast_len], mast_center), (p.GEOM_SPHERE, [0.09], head)]

@@ -194,7 +194,10 @@ class ArmChain:
 
 
 def declare_laser(robot: BulletRobot) -> None:
-    """A base with ``laser_height`` > 0 carries the planar localisation laser."""
+    """A base with ``laser_height`` > 0 carries the planar localisation laser; the base box must
+    have a size (ValueError, reported as one line naming the robot)."""
+    if min(robot.base_size) <= 0:
+        raise ValueError(f"base_size {list(robot.base_size)}: every side must be positive")
     if robot.laser_height > 0:
         robot.capabilities = robot.capabilities | {Capability.PLANAR_LASER}
 

@@ -219,3 +219,15 @@ def test_differential_base_turns_drives_turns_symmetrically(open_world) -> None:
         controls, rolled = robot.controls_from_path(np.vstack([a, b]))
         assert np.allclose(rolled[-1], b, atol=1e-9)
         assert np.allclose(controls[:, 1][np.abs(controls[:, 0]) > 1e-9], 0.0)  # no turning while driving
+
+
+def test_link_points_of_a_degenerate_mesh_are_its_vertices_not_an_error() -> None:
+    """A zero-size part (a free flyer of radius 0, a URDF mesh of zero area) samples its
+    triangles uniformly instead of failing on probabilities that do not sum to 1."""
+    from explore.motion.bullet_robot import _surface_samples
+
+    vertices = np.zeros((3, 3))
+    points = _surface_samples(vertices, np.array([[0, 1, 2]]), spacing=0.01)
+    assert len(points) >= 1 and np.allclose(points, 0.0)
+    tiny = np.array([[0.0, 0.0, 0.0], [1e-9, 0.0, 0.0], [0.0, 1e-9, 0.0]])
+    assert np.abs(_surface_samples(tiny, np.array([[0, 1, 2]]), spacing=0.01)).max() <= 1e-9

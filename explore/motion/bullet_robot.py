@@ -27,7 +27,8 @@ def _surface_samples(vertices: Array, triangles: np.ndarray, spacing: float) -> 
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     count = int(min(20000, max(50, 8 * area.sum() / spacing**2)))
     rng = np.random.default_rng(0)
-    pick = rng.choice(len(tri), size=count, p=area / max(area.sum(), 1e-12))
+    total = area.sum()
+    pick = rng.choice(len(tri), size=count, p=area / total if total > 0 else None)  # a degenerate mesh: uniform
     u, v = rng.random(count), rng.random(count)
     flip = u + v > 1.0
     u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
