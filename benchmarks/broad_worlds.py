@@ -18,6 +18,8 @@ import numpy as np
 import yaml
 
 SET_FILE = Path(__file__).with_name("broad_set.yaml")
+#: objects the calibration of the stop never saw (the broad set is what it was chosen on)
+HELDOUT_FILE = Path(__file__).with_name("heldout_set.yaml")
 PEDESTAL_TOP = 0.50
 SENSORS = {
     "laser_striper": {"plugin": "laser_striper"},
@@ -28,9 +30,9 @@ SENSORS = {
 }
 
 
-def broad_objects() -> list[dict[str, Any]]:
-    """The entries of ``broad_set.yaml``."""
-    return list(yaml.safe_load(SET_FILE.read_text())["objects"])
+def broad_objects(set_file: Path = SET_FILE) -> list[dict[str, Any]]:
+    """The entries of ``broad_set.yaml`` (or of another set file of the same layout)."""
+    return list(yaml.safe_load(set_file.read_text())["objects"])
 
 
 def world_data(entry: dict[str, Any], sensor: str = "laser_striper") -> dict[str, Any]:
@@ -52,16 +54,17 @@ def world_data(entry: dict[str, Any], sensor: str = "laser_striper") -> dict[str
     }
 
 
-def write_worlds(directory: Path, sensor: str = "laser_striper", names: list[str] | None = None) -> list[Path]:
+def write_worlds(directory: Path, sensor: str = "laser_striper", names: list[str] | None = None,
+                 set_file: Path = SET_FILE) -> list[Path]:
     """One world file per object of the set (or of ``names``) in ``directory``; their paths."""
     if sensor not in SENSORS:
         raise ValueError(f"--sensor: {sensor!r} is not one of {', '.join(SENSORS)}")
-    entries = broad_objects()
+    entries = broad_objects(set_file)
     if names:
         known = {e["name"] for e in entries}
         unknown = sorted(set(names) - known)
         if unknown:
-            raise ValueError(f"--objects: {', '.join(unknown)} not in {SET_FILE.name} "
+            raise ValueError(f"--objects: {', '.join(unknown)} not in {set_file.name} "
                              f"(valid: {', '.join(sorted(known))})")
         entries = [e for e in entries if e["name"] in names]
     directory.mkdir(parents=True, exist_ok=True)

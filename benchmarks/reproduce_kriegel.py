@@ -311,8 +311,9 @@ def speed(repeat: int, world: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", default="bunny_pedestal,duck_pedestal,teddy_pedestal")
-    parser.add_argument("--set", choices=("broad",), default=None,
-                        help="run the broad object set (benchmarks/broad_set.yaml) instead of --worlds")
+    parser.add_argument("--set", choices=("broad", "heldout"), default=None,
+                        help="run the broad object set (benchmarks/broad_set.yaml), or the objects the stop was not "
+                        "calibrated on (heldout_set.yaml), instead of --worlds")
     parser.add_argument("--objects", default="", help="--set broad: comma list of the set's objects (default all)")
     parser.add_argument("--sensor", default="laser_striper", help="--set broad: laser_striper or depth_camera")
     parser.add_argument("--missing", default="", help="write pictures of the uncovered surface of every run "
@@ -350,13 +351,14 @@ def main(argv: list[str] | None = None) -> int:
 
     registry = Registry.load()
     worlds = [w for w in args.worlds.split(",") if w]
-    if args.set == "broad":
-        from broad_worlds import write_worlds
+    if args.set:
+        from broad_worlds import HELDOUT_FILE, SET_FILE, write_worlds
 
         world_dir = Path(tempfile.mkdtemp(prefix="broad_worlds_"))
         try:
             names = [n for n in args.objects.split(",") if n]
-            worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names)]
+            set_file = HELDOUT_FILE if args.set == "heldout" else SET_FILE
+            worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names, set_file)]
         except ValueError as error:
             parser.error(str(error))
     if args.profile:
