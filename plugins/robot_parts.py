@@ -69,7 +69,7 @@ COMMON_PARAMS = (
         choices=("stop", "continue"),
     ),
     Param("point_spacing", float, 0.03, "m", "spacing of surface points tested against the PVS", low=0.005),
-    Param("ik_attempts", int, 30, "", "random restarts of IK", low=1),
+    Param("ik_attempts", int, 30, "", "random restarts of IK", low=1, high=10000),
 )
 SENSOR_PARAMS = (
     Param(
