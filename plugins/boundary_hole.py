@@ -9,7 +9,7 @@ import numpy as np
 
 from explore.api import ViewGenerator
 from explore.core import Array, Param, Points3, fibonacci_sphere
-from explore.mapping import first_blocked
+from explore.mapping import SUPPORT_MARGIN, first_blocked
 from explore.nbv import (
     Candidate,
     PlanningContext,
@@ -292,7 +292,7 @@ class HoleRescan(ViewGenerator):
         Param("extend", float, 1.1, "", "path ends at c_h -/+ extend * d_h (Eq. 4.22-4.23)", low=0.1),
         Param("merge_distance", float, 0.02, "m", "merge holes with centres this close ...", low=0.0),
         Param("merge_angle_deg", float, 30.0, "deg", "... and normals within this angle", low=0.0),
-        Param("contact_band", float, 0.006, "m",
+        Param("contact_band", float, SUPPORT_MARGIN, "m",
               "skip holes lying entirely this close to the support (its contact footprint, unobservable); "
               "holes that touch the support and rise above it are scanned", low=0.0),
         Param("standoff", float, 0.0, "m", "sensor distance d_s; 0 = the sensor's optimal distance", low=0.0),

@@ -4,6 +4,7 @@ information-gain ray casting, and the ground-truth metrics of a model.
 
 # The names other packages use (they import from the package, never from its modules).
 from explore.mapping.mesh_holes import (
+    SUPPORT_MARGIN,
     border_edges,
     boundary_loops,
     coverage_area,
@@ -69,6 +70,7 @@ __all__ = [
     "REAR_ENTROPY",
     "REAR_VOXEL",
     "SelectionTimer",
+    "SUPPORT_MARGIN",
     "SparsePVS",
     "SurfaceModel",
     "THRESHOLDS",
