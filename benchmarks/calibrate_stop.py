@@ -6,7 +6,10 @@ seeds, picks the one that keeps every run's c_a at the stop at or above the targ
 fewest scans, and checks it on seeds the choice did not see. The rule is ``coverage_target``'s
 (all with d̄_m >= 20 %): stop at ĉ_m >= T; or at ĉ_m >= E once the strategy's own generator has
 no candidate left (the next scan comes from the fallback generator); or, with ``off_support``,
-at ĉ_m without the support opening >= S once a fallback scan has been taken.
+at ĉ_m without the support opening >= S once a fallback scan has been taken. The second clause
+is replayed approximately (a fallback scan can follow while the strategy's own candidates are
+still on the stack, which the session does not count as exhausted), so a choice is checked by
+running it.
 
     .venv/bin/python benchmarks/calibrate_stop.py runs.json --fit 0-4 --check 5-9
 """

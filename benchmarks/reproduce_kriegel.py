@@ -414,8 +414,7 @@ def main(argv: list[str] | None = None) -> int:
             report(results[job[:3]])
     if args.runs_json:
         keys = ("strategy", "world", "seed", "n_s", "reason", "coverage", "coverage_estimate", "coverage_off_support",
-                "density", "sources",
-                "fallback_scans", "scan_path_m")
+                "density", "sources", "fallback_scans", "scan_path_m")
         Path(args.runs_json).write_text(json.dumps([{k: m.get(k) for k in keys} for m in results.values()]))
     options = {"variant": args.variant or "need", "normalise": args.normalise or "max", "hierarchy": args.hierarchy}
     rows = [summarise([results[(w, s, seed)] for seed in seeds], s, Path(w).stem if args.set else w, max_scans, options)
