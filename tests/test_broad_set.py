@@ -12,7 +12,13 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from broad_worlds import PEDESTAL_TOP, broad_objects, missing_surface_png, write_worlds  # noqa: E402
+from broad_worlds import (  # noqa: E402
+    HELDOUT_FILE,
+    PEDESTAL_TOP,
+    broad_objects,
+    missing_surface_png,
+    write_worlds,
+)
 
 from explore.mapping import coverage  # noqa: E402
 from explore.sim import load_world_spec  # noqa: E402
@@ -34,6 +40,14 @@ def test_the_set_is_broad_and_every_world_loads(tmp_path: Path) -> None:
             assert spec.sensor.plugin == sensor
     with pytest.raises(ValueError, match="not in broad_set.yaml"):
         write_worlds(tmp_path, names=["no_such_object"])
+
+
+def test_the_held_out_objects_are_not_in_the_set_and_every_world_loads(tmp_path: Path) -> None:
+    held_out = broad_objects(HELDOUT_FILE)
+    assert len(held_out) >= 8
+    assert not {e["source"] for e in held_out} & {e["source"] for e in broad_objects()}
+    for path in write_worlds(tmp_path, set_file=HELDOUT_FILE):
+        load_world_spec(path)
 
 
 @pytest.mark.parametrize("name", ["mug", "torus", "jenga"])
