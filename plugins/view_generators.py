@@ -9,6 +9,7 @@ line sensors and single views for area sensors. Boundary Search and Hole Rescan 
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from typing import Any
 
 import numpy as np
@@ -53,8 +54,9 @@ class _OncePerRun(ViewGenerator):
         self._done = True
         return self.candidates(ctx)
 
+    @abstractmethod
     def candidates(self, ctx: PlanningContext) -> list[Candidate]:
-        raise NotImplementedError
+        """The whole search space, made on the first call of a run."""
 
 
 # ---------------------------------------------------------------------------------------

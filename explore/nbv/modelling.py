@@ -39,7 +39,7 @@ from explore.motion import Capability, Execution
 from explore.nbv.candidates import STOP, Candidate, CandidateStack, Decision, PlanningContext, frame_from
 from explore.nbv.modelling_metrics import Evaluation
 from explore.nbv.modelling_planning import CandidatePlanning
-from explore.nbv.modelling_records import ModellingResult, ScanRecord, resolve_strategy
+from explore.nbv.modelling_records import FALLBACK_PREFIX, ModellingResult, ScanRecord, resolve_strategy
 from explore.nbv.scan_planning import ScanMotion, ScanPlan, make_planner
 from explore.sim import Scan, ScanPath
 
@@ -306,7 +306,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         coverage, off_support = self.surface.coverage_areas(support_z=float(self.ctx.region_min[2]))
         self.ctx.coverage_history.append(coverage)
         self.ctx.off_support_history.append(off_support)
-        self.ctx.fallback_scans += self._pending["source"].startswith("fallback_")
+        self.ctx.fallback_scans += self._pending["source"].startswith(FALLBACK_PREFIX)
         self.ctx.density_history.append(float(self.surface.mean_density()))
         self.ctx.unknown_history.append(int(self.pvs.counts()["unknown"]))
         out["integrate_s"] = time.perf_counter() - start

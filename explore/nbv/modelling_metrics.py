@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from explore.mapping import GroundTruthMetrics, coverage_auc
+from explore.nbv.modelling_records import FALLBACK_PREFIX
 
 
 class Evaluation:
@@ -50,7 +51,7 @@ class Evaluation:
                 "rms_error_at_stop_m": at_stop["rms_error"], "chamfer_at_stop_m": at_stop["chamfer"],
                 "coverage_auc": coverage_auc(curve, self.max_scans),
             }
-        fallback = sum(r.source.startswith("fallback_") for r in self.records)
+        fallback = sum(r.source.startswith(FALLBACK_PREFIX) for r in self.records)
         return {
             "strategy": self.strategy.name,
             "world": self.sim.spec.name,

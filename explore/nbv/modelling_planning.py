@@ -12,7 +12,7 @@ import numpy as np
 
 from explore.core import BUDGET, pick_best
 from explore.nbv.candidates import STOP, SWITCH, Candidate, Decision
-from explore.nbv.modelling_records import failure_summary
+from explore.nbv.modelling_records import FALLBACK_PREFIX, failure_summary
 from explore.nbv.scan_planning import KEEP_FOR_LATER, ScanPlan
 
 
@@ -44,7 +44,7 @@ class CandidatePlanning:
             self.fallback.reset()
         extra = [c for c in self.fallback.generate(self.ctx) if self.motion.may_reach(c.target)]
         for cand in extra:
-            cand.source = f"fallback_{cand.source}"
+            cand.source = f"{FALLBACK_PREFIX}{cand.source}"
         return extra
 
     def select(self, rescore: bool = True) -> Candidate | None:

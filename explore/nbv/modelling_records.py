@@ -8,6 +8,9 @@ from typing import Any
 
 from explore.nbv.scan_planning import ScanPlan
 
+#: source prefix of candidates from the session's fallback generator ("fallback_sphere", ...)
+FALLBACK_PREFIX = "fallback_"
+
 
 @dataclass
 class ScanRecord:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.core import BadInput, brief, check_path_name, load_yaml, valid_names, validate_params
+from explore.runtime.behaviour import ExploreBehaviour
 from explore.runtime.decorators import RepeatUntil
 from explore.sim import repo_root
 
@@ -213,8 +214,6 @@ def _check_blackboard_keys(root: Node, registry: Any) -> None:
     Checked only when every behaviour declares what it writes (``writes`` of the base class);
     a behaviour that registers blackboard keys on its own could write anything.
     """
-    from explore.runtime.behaviour import ExploreBehaviour
-
     written: set[str] = set()
     for node in root.walk():
         if node.type == "behaviour":
