@@ -12,6 +12,7 @@ still on the stack, which the session does not count as exhausted), so a choice 
 running it.
 
     .venv/bin/python benchmarks/calibrate_stop.py runs.json --fit 0-4 --check 5-9
+    .venv/bin/python benchmarks/calibrate_stop.py runs.json --rule 0.94,0.85,0.99 --check 0-4
 """
 
 from __future__ import annotations
@@ -61,6 +62,23 @@ def outcome(runs: list[dict], rule: tuple[float, float, float], density: float,
     return ca, scans, budget
 
 
+def search(fit: list[dict], target: float, density: float, fallback: str,
+           no_off_support: bool) -> tuple[float, float, float]:
+    """The rule with every fit run's c_a at the stop >= ``target`` and the fewest scans."""
+    grid = np.round(np.arange(0.70, 0.995, 0.01), 2)
+    off_grid = [2.0] if no_off_support else [2.0, *np.round(np.arange(0.95, 1.001, 0.01), 2)]  # 2: never
+    best = None
+    for main_t in grid:
+        for exhausted_t in grid[grid <= main_t]:
+            for off_t in off_grid:
+                rule = (float(main_t), float(exhausted_t), float(off_t))
+                ca, scans, _ = outcome(fit, rule, density, fallback)
+                key = (min(ca) >= target, -float(np.median(scans)), -float(np.mean(scans)), min(ca))
+                if best is None or key > best[0]:
+                    best = (key, rule)
+    return best[1]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", type=Path, help="reproduce_kriegel.py --runs-json output")
@@ -70,24 +88,22 @@ def main() -> None:
     parser.add_argument("--target", type=float, default=97.0, help="lowest c_a at the stop (%%)")
     parser.add_argument("--density", type=float, default=0.2)
     parser.add_argument("--fallback", default="fallback_", help="source prefix of the fallback generator's scans")
+    parser.add_argument("--rule", default="",
+                        help="T,E,S: replay this rule (e.g. the calibrated 0.94,0.85,0.99) instead of searching; "
+                             "--fit is then unused")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
     runs = [r for r in json.loads(args.runs.read_text()) if r.get("coverage_off_support")]
     fit = [r for r in runs if r["seed"] in seeds_of(args.fit)]
     check = [r for r in runs if r["seed"] in seeds_of(args.check)]
-    grid = np.round(np.arange(0.70, 0.995, 0.01), 2)
-    off_grid = [2.0] if args.no_off_support else [2.0, *np.round(np.arange(0.95, 1.001, 0.01), 2)]  # 2: never
-    best = None
-    for main_t in grid:
-        for exhausted_t in grid[grid <= main_t]:
-            for off_t in off_grid:
-                rule = (float(main_t), float(exhausted_t), float(off_t))
-                ca, scans, _ = outcome(fit, rule, args.density, args.fallback)
-                key = (min(ca) >= args.target, -float(np.median(scans)), -float(np.mean(scans)), min(ca))
-                if best is None or key > best[0]:
-                    best = (key, rule)
-    rule = best[1]
+    if args.rule:
+        rule = tuple(float(v) for v in args.rule.split(","))
+        if len(rule) != 3:
+            parser.error("--rule: three numbers T,E,S")
+        fit = check
+    else:
+        rule = search(fit, args.target, args.density, args.fallback, args.no_off_support)
     main_t, exhausted_t, off_t = rule
     rows = []
     by_object: dict[str, list[dict]] = defaultdict(list)
@@ -110,9 +126,9 @@ def main() -> None:
         print(json.dumps(summary, indent=1))
         return
     off_text = "" if off_t > 1 else f", or ĉ_m off the support {off_t:.2f} after a fallback scan"
-    print(f"ĉ_m {main_t:.2f}, or {exhausted_t:.2f} with no candidate left{off_text} "
-          f"(fit on seeds {args.fit}: {len(fit)} runs, lowest c_a {min(fit_ca):.1f} %, "
-          f"median {np.median(fit_scans):.0f} scans, {fit_budget} without a stop)")
+    chosen = "replayed" if args.rule else (f"fit on seeds {args.fit}: {len(fit)} runs, lowest c_a {min(fit_ca):.1f} %, "
+                                           f"median {np.median(fit_scans):.0f} scans, {fit_budget} without a stop")
+    print(f"ĉ_m {main_t:.2f}, or {exhausted_t:.2f} with no candidate left{off_text} ({chosen})")
     print(f"check on seeds {args.check}: {len(check)} runs, lowest c_a {min(chk_ca):.1f} %, "
           f"{summary['check']['below_target']} below {args.target:g} %, median {np.median(chk_scans):.0f} scans, "
           f"{chk_budget} without a stop\n")
