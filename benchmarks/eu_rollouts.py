@@ -24,8 +24,8 @@ EXECUTORS = {"open loop": (False, 0.0), "waypoints": (True, 0.0), "waypoints + 0
 
 
 def measure(seed: int, k: int, world: str) -> list[dict[str, Any]]:
-    from explore.motion import follow_plan
-    from explore.nbv import NBVSSession, colliding_rollouts, plan_controls
+    from explore.motion import follow_plan, plan_controls
+    from explore.nbv import NBVSSession, colliding_rollouts
     from explore.runtime import Registry
     from explore.sim import Simulation
 

@@ -23,6 +23,7 @@ from explore.nbv import (
     clip_above,
     frame_from,
     in_environment_boxes,
+    standoff_for,
 )
 from explore.sim import ScanPath
 
@@ -72,7 +73,8 @@ class Sphere(_OncePerRun):
         Param("n_views", int, 121, "", "views for area sensors (IROS 2012: 121)", low=1),
         Param("min_elevation_deg", float, -20.0, "deg", "lowest elevation (the pedestal hides the bottom)"),
         Param("max_elevation_deg", float, 80.0, "deg", "highest elevation"),
-        Param("radius", float, 0.0, "m", "distance from the region centre; 0 = optimal distance + 1/4 region", low=0.0),
+        Param("radius", float, 0.0, "m", "distance from the region centre; 0 = the modelling standoff + 1/4 region",
+              low=0.0),
         Param("path_length", float, 0.3, "m", "scan path length (thesis: ~300 mm, covers the object)", low=0.01),
         Param("lines", bool, True, "", "paths for line sensors (False: single views on a dome)"),
     )
@@ -80,7 +82,7 @@ class Sphere(_OncePerRun):
     def views(self, ctx: PlanningContext) -> list[tuple[Array, Array]]:
         """(eye, view direction) pairs of the search space."""
         centre = ctx.region_centre
-        radius = self.radius or float(ctx.sensor.optimal_distance + 0.25 * np.max(ctx.region_max - ctx.region_min))
+        radius = self.radius or float(standoff_for(ctx) + 0.25 * np.max(ctx.region_max - ctx.region_min))
         out = []
         if ctx.sensor.geometry == "line" and self.lines:
             elev = np.deg2rad(np.linspace(self.min_elevation_deg, self.max_elevation_deg, self.n_inclination))
@@ -110,7 +112,7 @@ class Sphere(_OncePerRun):
 
 
 class RandomViews(ViewGenerator):
-    """Random views around the region at the sensor's optimal distance (a baseline)."""
+    """Random views around the region at the modelling standoff (a baseline)."""
 
     name = "random"
     params = (
@@ -121,7 +123,7 @@ class RandomViews(ViewGenerator):
 
     def generate(self, ctx: PlanningContext) -> list[Candidate]:
         centre = ctx.region_centre
-        radius = float(ctx.sensor.optimal_distance + 0.25 * np.max(ctx.region_max - ctx.region_min))
+        radius = float(standoff_for(ctx) + 0.25 * np.max(ctx.region_max - ctx.region_min))
         low = np.sin(np.deg2rad(self.min_elevation_deg))
         out = []
         while len(out) < self.count:
@@ -146,7 +148,7 @@ class RandomViews(ViewGenerator):
 # ---------------------------------------------------------------------------------------
 class ReachableViews(_OncePerRun):
     """Views the robot can take: sensor poses of random configurations within its joint limits that
-    look at the region at the sensor's optimal distance, spread over positions and directions.
+    look at the region at the modelling standoff, spread over positions and directions.
 
     The sphere and the boundary candidates are placed for the object, not for the robot: a
     fixed-base arm reaches few of them (in ``workcell`` about one in seven views along a surface
@@ -167,14 +169,14 @@ class ReachableViews(_OncePerRun):
 
     def poses(self, ctx: PlanningContext) -> np.ndarray:
         """(n, 4, 4) sensor poses of random configurations whose optical axis meets the region at the
-        sensor's optimal distance, outside the known environment."""
+        modelling standoff, outside the known environment."""
         robot = ctx.robot
         lower, upper = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)
         configs = lower + ctx.rng.random((self.samples, len(lower))) * (upper - lower)
         poses = np.array([robot.fk(q) for q in configs])
         if hasattr(robot, "set_config"):
             robot.set_config(robot.q)
-        aim = poses[:, :3, 3] + float(ctx.sensor.optimal_distance) * poses[:, :3, 2]
+        aim = poses[:, :3, 3] + standoff_for(ctx) * poses[:, :3, 2]
         inside = np.all((aim >= ctx.region_min) & (aim <= ctx.region_max), axis=1)
         inside &= ~in_environment_boxes(ctx, poses[:, :3, 3])
         return poses[inside]

@@ -1,5 +1,6 @@
 """Executing a plan with positioning noise: open loop against re-localising at its waypoints
-(:func:`explore.motion.follow_plan`, the executor of the NBVS runs and of their rollouts)."""
+(:func:`explore.motion.follow_plan`, the executor of the NBVS runs, of their rollouts and of
+modelling with a mobile base)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from explore.motion import MotionPlan, control_pieces, follow_plan
+from explore.motion import MotionPlan, control_pieces, execute_following, follow_plan
 
 TRUNCATED_STD = 0.9866  # std of a normal truncated at +-3 sigma, in sigmas
 
@@ -88,3 +89,29 @@ def test_the_executed_motion_is_a_rollout(drive) -> None:
     errors = sample.applied[0] - sample.commands[0]
     assert np.abs(errors[:, :2]).max() <= 3 * np.array([robot.sigma_v, robot.sigma_w]).max() + 1e-12
     assert not errors[:, 2:].any()  # the arm is exact (sigma 0)
+
+
+def test_execute_following_runs_the_relocalising_controller_in_the_true_world(cluttered) -> None:
+    """The executor of modelling with a mobile base: the same states as the controller's sample
+    from the same random numbers, ending within 1 cm of the plan (open loop: centimetres to
+    decimetres, see above), with the errors recorded as the execution's noise."""
+    robot = cluttered.robot
+    start = robot.q.copy()
+    x, y, _, yaw_deg = cluttered.spec.robot.base  # the world's start (other tests move the robot)
+    start[:3] = (x, y, math.radians(yaw_deg))
+    goal = start.copy()
+    goal[:3] += (0.8, 0.0, 0.5)  # away from the table, past no chair
+    controls, nominal = robot.controls_from_path(np.vstack([start, goal]))
+    try:
+        run = execute_following(robot, MotionPlan(nominal, controls=controls, dt=robot.dt), np.random.default_rng(6),
+                                feedback=True, leg_length=0.25)
+    finally:
+        robot.q = start.copy()
+        robot.set_config(start)
+    sample = follow_plan(robot, start, controls, np.random.default_rng(6), k=1, feedback=True, leg_length=0.25,
+                         keep_controls=True)
+    assert run.completed and not run.collisions
+    assert np.allclose(run.final, sample.configs[0, -1], atol=1e-9)
+    assert np.hypot(*(run.final[:2] - nominal[-1, :2])) < 0.01
+    assert np.allclose(run.noise, sample.applied[0] - sample.commands[0])
+    assert np.abs(run.noise[:, :2]).max() > 0

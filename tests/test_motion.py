@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 
 import numpy as np
 import pytest
 
 from explore.core import look_at
-from explore.motion import MotionProblem, classify_blocked, linear_scan_path_ik, validate_path
+from explore.motion import BodyFreeSpace, MotionProblem, classify_blocked, linear_scan_path_ik, validate_path
 from explore.sim import ScanPath
 
 
@@ -71,6 +72,32 @@ def test_unknown_space_blocks_a_path_until_observed_free(workcell, endpoints) ->
         pvs.integrate(_clearing_scan(tip - 0.07, tip + 0.07))
     assert problem.is_valid(b) and problem.is_valid_motion(a, b)
     assert classify_blocked(robot, b[None], pvs.probability, space_free=pvs.is_free) == "free"
+
+
+def test_the_space_the_robot_stood_in_is_free_for_planning(workcell, endpoints) -> None:
+    """Unknown space around the arm blocks the configuration it stands in until it is recorded as
+    the robot's own volume; the PVS itself is unchanged and a cached motion is invalidated."""
+    from explore.mapping import PVS
+
+    robot = workcell.robot
+    _, b = endpoints
+    tip = robot.fk(b)[:3, 3]
+    pvs = PVS(tip - 0.06, tip + 0.06, 0.02)
+    free_space = BodyFreeSpace(pvs)
+    problem = MotionProblem(robot, space_free=free_space.is_free)
+    assert problem.space_bounds is not None  # only the links near the PVS box are sampled
+    assert not problem.is_valid(b)
+    before = problem.cache_key(b, b)
+    points = robot.link_points(b, within=(pvs.min_corner, pvs.max_corner))
+    free_space.stand(points)
+    assert problem.is_valid(b) and problem.cache_key(b, b) != before
+    ijk, inside = pvs.index(points)
+    assert inside.any() and free_space.is_free(points[inside]).all()
+    assert not pvs.is_free(points[inside]).any()  # the map keeps its evidence
+    every = np.stack(np.meshgrid(*[np.arange(n) for n in pvs.shape], indexing="ij"), axis=-1).reshape(-1, 3)
+    stood = {tuple(v) for v in ijk[inside]}
+    others = pvs.centers(np.array([v for v in every if tuple(v) not in stood]))
+    assert len(others) and not free_space.is_free(others).any()  # nowhere else
 
 
 def test_linear_scan_path_in_10mm_portions(workcell) -> None:
@@ -299,3 +326,24 @@ def test_roadmap_planners_never_deadlock_and_repeat_their_path(planner, solves) 
     assert out.returncode == 0, out.stderr[-2000:]
     found, distinct = map(int, out.stdout.split())
     assert found == solves and distinct == 1
+
+
+def test_a_base_left_within_the_clearance_first_backs_out(registry, cluttered) -> None:
+    """Noise can stop the base 5 mm from the table, inside the 1 cm planning clearance though not
+    touching it; every motion from there is invalid. The plan then starts with a short motion,
+    valid at zero clearance all along, to a configuration that keeps the clearance."""
+    from explore.mapping import PVS
+    from explore.nbv.scan_planning import ScanMotion, make_planner
+
+    robot = cluttered.robot
+    q = robot.q.copy()
+    q[:3] = (0.615, -0.35, math.pi)  # facing the table (x <= 0.3), the base's front 5 mm from it
+    motion = ScanMotion(robot, PVS(np.array([-0.2, -0.2, 0.72]), np.array([0.2, 0.2, 0.95]), 0.02),
+                        make_planner(registry, robot, None), np.random.default_rng(0), 1, noise=True)
+    problem = motion.problem
+    assert not problem.is_valid(q) and not robot.in_collision(q, "known", 0.0)
+    escape = motion._escape(q, problem)
+    assert escape is not None and np.allclose(escape.path[0], q)
+    assert problem.is_valid(escape.path[-1]) and all(problem.is_valid(x, margin=0.0) for x in escape.path)
+    assert np.linalg.norm(escape.path[-1][:2] - q[:2]) <= 4 * 0.02 * math.sqrt(2)
+    assert escape.controls is not None and len(escape.controls) == len(escape.path) - 1

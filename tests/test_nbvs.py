@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from explore.motion import MotionPlan, MotionProblem, follow_plan
+from explore.motion import MotionPlan, MotionProblem, follow_plan, plan_controls
 from explore.nbv import (
     STAGES,
     NBVSSession,
@@ -15,7 +15,6 @@ from explore.nbv import (
     StateSamples,
     colliding_rollouts,
     expected_utility,
-    plan_controls,
     samples_needed,
 )
 

@@ -16,6 +16,7 @@ from explore.nbv import (
     clip_above,
     frame_from,
     make_target,
+    modelling_standoff,
     repair,
     rotation,
     segments_hit_boxes,
@@ -353,3 +354,19 @@ def test_reachable_views_are_poses_the_arm_takes_looking_into_the_region(registr
     assert min(np.linalg.norm(a[:3, 3] - b[:3, 3]) for i, a in enumerate(middles) for b in middles[i + 1:]) > 0.02
     reached = sum(robot.ik(pose, np.random.default_rng(1)) is not None for pose in middles)
     assert reached >= 0.75 * len(found)
+
+
+def test_a_coarse_camera_comes_closer_than_its_optimal_distance(registry, striper) -> None:  # noqa: ANN001
+    """Views stand where the central beams fall R_r = 2 mm apart, if that is nearer than the
+    sensor's optimal distance: a 160 x 120 camera over 58 degrees (5.9 mm pixels at 0.85 m) comes to
+    about 0.3 m; the striper and a 640 x 480 camera keep theirs; never nearer than 1.25 x min range."""
+    coarse = registry.create("sensor", "depth_camera", {"width": 160, "height": 120, "min_range": 0.2,
+                                                          "max_range": 1.5})
+    pixel = np.arctan(1.0 / coarse.intrinsics[0, 0])  # the central pixel's angle
+    assert modelling_standoff(coarse, 0.002) == pytest.approx(0.002 / np.tan(pixel), rel=1e-3)
+    assert 0.25 < modelling_standoff(coarse, 0.002) < 0.35 < coarse.optimal_distance
+    fine = registry.create("sensor", "depth_camera", {"width": 640, "height": 480, "min_range": 0.3,
+                                                        "max_range": 1.0})
+    assert modelling_standoff(fine, 0.002) == fine.optimal_distance
+    assert modelling_standoff(striper, 0.002) == striper.optimal_distance
+    assert modelling_standoff(coarse, 0.0001) == pytest.approx(1.25 * coarse.min_range)

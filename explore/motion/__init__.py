@@ -25,7 +25,7 @@
 # The names other packages use (they import from the package, never from its modules).
 from explore.motion.bullet_robot import BulletRobot
 from explore.motion.collision import BulletCollider, Part, self_collision_pairs
-from explore.motion.feedback import Rollouts, control_pieces, follow_plan
+from explore.motion.feedback import Rollouts, control_pieces, execute_following, follow_plan, plan_controls
 from explore.motion.geometric import OPTIONAL_GEOMETRIC, geometric_planner_names, plan, planner_class, straight_line
 from explore.motion.kernels import rigid_clearances, rigid_first_hit
 from explore.motion.kinodynamic import control_planner_names, plan_kinodynamic
@@ -33,7 +33,7 @@ from explore.motion.mobile import PlanarChecker, box_distance, plan_mobile
 from explore.motion.noise import truncated_normal, truncated_normal_logpdf
 from explore.motion.planner import MotionPlanner
 from explore.motion.planning_clock import COSTS, WALL_FACTOR, Budget, work_clock
-from explore.motion.problem import MotionProblem, path_is_valid, path_length, validate_path
+from explore.motion.problem import BodyFreeSpace, MotionProblem, path_is_valid, path_length, validate_path
 from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Capability, Robot
 from explore.motion.scan_paths import (
@@ -49,6 +49,7 @@ __all__ = [
     "BLOCK_OCCUPIED",
     "BLOCK_UNKNOWN",
     "Budget",
+    "BodyFreeSpace",
     "BulletCollider",
     "BulletRobot",
     "COSTS",
@@ -69,12 +70,14 @@ __all__ = [
     "classify_blocked",
     "control_pieces",
     "control_planner_names",
+    "execute_following",
     "follow_plan",
     "geometric_planner_names",
     "linear_scan_path_ik",
     "path_is_valid",
     "path_length",
     "plan",
+    "plan_controls",
     "plan_kinodynamic",
     "plan_mobile",
     "planner_class",

@@ -35,6 +35,7 @@ import numpy as np
 
 from explore.core import Array, wrap_angle
 from explore.motion.noise import STILL, truncated_normal, truncated_normal_logpdf
+from explore.motion.records import Execution, MotionPlan
 
 
 @dataclass
@@ -166,6 +167,33 @@ def follow_plan(robot: Any, start: Array, controls: np.ndarray, rng: np.random.G
         applied = np.stack(stepper.applied, axis=1)[: stepper.k]
         commands = np.stack(stepper.commands, axis=1)[: stepper.k]
     return Rollouts(configs[: stepper.k], configs[stepper.k], stepper.log_prob[: stepper.k], applied, commands)
+
+
+def plan_controls(robot: Any, plan: MotionPlan | np.ndarray) -> tuple[Array, np.ndarray]:
+    """Start state and per-``dt`` nominal controls of a plan (as ``robot.execute`` runs it)."""
+    if isinstance(plan, MotionPlan) and plan.controls is not None:
+        return np.asarray(plan.path[0], dtype=float), np.asarray(plan.controls, dtype=float)
+    path = plan.path if isinstance(plan, MotionPlan) else np.asarray(plan, dtype=float)
+    controls, _ = robot.controls_from_path(path)
+    return np.asarray(path[0], dtype=float), controls
+
+
+def execute_following(robot: Any, plan: MotionPlan | np.ndarray, rng: np.random.Generator | None,
+                      feedback: bool = True, leg_length: float = 0.0) -> Execution:
+    """Execute ``plan`` as :func:`follow_plan` steers it (``rng`` None: without noise); the
+    motion is replayed in the TRUE world, where a collision is an event (``robot.execute``).
+
+    The execution's controls are the commands and its noise the errors added to them.
+    """
+    start, controls = plan_controls(robot, plan)
+    done = follow_plan(robot, start, controls, rng, 1, feedback, leg_length, keep_controls=True)
+    assert done.applied is not None and done.commands is not None
+    run = robot.execute(MotionPlan(done.configs[0], controls=done.applied[0], dt=float(robot.dt)),
+                        None, noise=False, world="true")
+    n = len(run.controls)  # fewer when a collision stopped the motion
+    run.controls, run.noise = done.commands[0][:n], (done.applied[0] - done.commands[0])[:n]
+    run.log_prob = float(done.log_prob[0])
+    return run
 
 
 def _follow_piece(stepper: _Stepper, controls: np.ndarray, nominal: list[Array], feedback: bool,

@@ -132,8 +132,7 @@ class BaseProblem:
     def __init__(self, problem: MotionProblem, carried: Array, goal: Array, lower: Array, upper: Array) -> None:
         self.problem, self.robot = problem, problem.robot
         ends = [carried[list(problem.robot.base_dofs)], goal]  # the drive's start and goal base poses
-        self.checker = PlanarChecker(problem, carried, drive_margin=float(self.robot.drive_clearance),
-                                     ends=ends)
+        self.checker = PlanarChecker(problem, carried, drive_margin=problem.drive_margin, ends=ends)
         self.checker.lower, self.checker.upper = lower, upper
         self.lower, self.upper = lower, upper
         self.resolution = problem.resolution

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import Array
+from explore.core import Array, Points3
 from explore.motion.planning_clock import Budget, charge
 
 if TYPE_CHECKING:
@@ -31,6 +31,9 @@ class MotionProblem:
     (with ``space_free``) every point sampled on its links is free in the PVS.
     ``space_bounds`` (lo, hi): ``space_free`` calls everything outside this box free, so only
     the robot parts near it are sampled (derived automatically for ``pvs.is_free``).
+    ``drive_margin``: how far a mobile base keeps from the known environment while it drives,
+    away from the drive's ends (:class:`explore.motion.PlanarChecker`); None: the robot's
+    ``drive_clearance``.
     """
 
     def __init__(
@@ -40,8 +43,10 @@ class MotionProblem:
         margin: float | None = None,
         resolution: float = 0.01,
         space_bounds: tuple[Array, Array] | None = None,
+        drive_margin: float | None = None,
     ) -> None:
         self.robot = robot
+        self.drive_margin = float(robot.drive_clearance if drive_margin is None else drive_margin)
         self.space_free = space_free
         self.margin = float(robot.clearance if margin is None else margin)
         self.resolution = float(resolution)  # max configuration step (L2) between checks
@@ -81,7 +86,8 @@ class MotionProblem:
 
     def pinned(self, dofs: Sequence[int], q: Array) -> MotionProblem:
         """The same problem with the joints ``dofs`` held at their values in ``q`` (e.g. the base)."""
-        out = MotionProblem(self.robot, self.space_free, self.margin, self.resolution, self.space_bounds)
+        out = MotionProblem(self.robot, self.space_free, self.margin, self.resolution, self.space_bounds,
+                            self.drive_margin)
         out.pins = {**self.pins, **{int(i): float(q[i]) for i in dofs}}
         out.motions = self.motions
         return out
@@ -117,6 +123,52 @@ class MotionProblem:
         """The piecewise-linear path the robot really follows for ``path`` (see ``execution_path``)."""
         expand = getattr(self.robot, "execution_path", None)
         return np.asarray(path, dtype=float) if expand is None else np.asarray(expand(path), dtype=float)
+
+
+class BodyFreeSpace:
+    """A PVS's free-space test that also calls free the voxels the robot's body has stood in.
+
+    The robot was there, so that space is free although no beam may have observed it (the arm
+    behind an eye-in-hand camera; a base a centimetre off its plan after noisy driving). Without
+    this a configuration the robot stands in can be invalid, and no motion can leave it.
+    Usable as ``space_free`` (:meth:`is_free`, with the PVS's box and a ``version`` for caching).
+    """
+
+    def __init__(self, pvs: Any) -> None:
+        self.pvs = pvs
+        self._keys = np.zeros(0, dtype=np.int64)
+        self._stamp = 0
+
+    @property
+    def min_corner(self) -> Array:
+        return self.pvs.min_corner
+
+    @property
+    def max_corner(self) -> Array:
+        return self.pvs.max_corner
+
+    @property
+    def version(self) -> tuple[int, int]:
+        return int(self.pvs.version), self._stamp
+
+    def _keys_of(self, points: Points3) -> tuple[np.ndarray, np.ndarray]:
+        ijk, inside = self.pvs.index(points)
+        return np.ravel_multi_index(ijk[inside].T, self.pvs.shape).astype(np.int64), inside
+
+    def stand(self, points: Points3) -> None:
+        """The robot's body (points on its links) stands here: their voxels are free from now on."""
+        keys, _ = self._keys_of(np.asarray(points, dtype=float).reshape(-1, 3))
+        merged = np.union1d(self._keys, keys)
+        if len(merged) != len(self._keys):
+            self._keys, self._stamp = merged, self._stamp + 1
+
+    def is_free(self, points: Points3, clearance: float = 0.0, outside_free: bool = True) -> np.ndarray:
+        """``pvs.is_free``, and True in the voxels the body has stood in."""
+        free = np.asarray(self.pvs.is_free(points, clearance, outside_free), dtype=bool)
+        if len(self._keys) and len(free):
+            keys, inside = self._keys_of(np.asarray(points, dtype=float).reshape(-1, 3))
+            free[inside] |= np.isin(keys, self._keys)
+        return free
 
 
 def _free_outside_box(space_free: SpaceFree | None) -> tuple[Array, Array] | None:

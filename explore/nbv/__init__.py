@@ -21,6 +21,7 @@ from explore.nbv.candidates import (
     frame_from,
     in_environment_boxes,
     make_target,
+    modelling_standoff,
     path_over,
     repair,
     rotation,
@@ -32,7 +33,6 @@ from explore.nbv.expected_utility import (
     StateSamples,
     colliding_rollouts,
     expected_utility,
-    plan_controls,
     samples_needed,
 )
 from explore.nbv.modelling import ModellingSession
@@ -76,7 +76,6 @@ __all__ = [
     "clip_above",
     "colliding_rollouts",
     "expected_utility",
-    "plan_controls",
     "footprint_width",
     "frame_from",
     "in_environment_boxes",
@@ -89,5 +88,6 @@ __all__ = [
     "rotation",
     "samples_needed",
     "segments_hit_boxes",
+    "modelling_standoff",
     "standoff_for",
 ]

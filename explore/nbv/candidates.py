@@ -154,6 +154,8 @@ class PlanningContext:
     best_score_diagnostics : diagnostics of the last selected candidate
     rng : the session's random generator
     support_margin : how far below the support plane (the region floor) a sensor may go
+    standoff : the sensor distance of the views (:func:`modelling_standoff`); 0: the sensor's
+        optimal distance
     registry : the plugin registry (for plugins that build the plugins they wrap)
     """
 
@@ -181,6 +183,7 @@ class PlanningContext:
     exhausted: bool = False  # the strategy's own generator left no candidate (a fallback's may be on the stack)
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     support_margin: float = 0.02
+    standoff: float = 0.0
     registry: Any = None
 
     @property
@@ -197,9 +200,38 @@ class PlanningContext:
         return float(self.region_min[2]) - self.support_margin
 
 
-def standoff_for(ctx: PlanningContext, value: float) -> float:
-    """``value`` (m), or the sensor's optimal distance when ``value`` <= 0."""
-    return value if value > 0 else float(ctx.sensor.optimal_distance)
+def standoff_for(ctx: PlanningContext, value: float = 0.0) -> float:
+    """``value`` (m), or the context's standoff (else the sensor's optimal distance) when ``value`` <= 0."""
+    if value > 0:
+        return value
+    return float(ctx.standoff) if ctx.standoff > 0 else float(ctx.sensor.optimal_distance)
+
+
+def beam_spacing_distance(sensor: RaySensor, spacing: float) -> float:
+    """Distance at which the sensor's central beams fall ``spacing`` apart on a surface facing it
+    (inf if it has a single beam)."""
+    dirs = np.asarray(sensor.local_directions(), dtype=float)
+    centre = int(np.argmax(dirs[:, 2]))
+    cos = dirs @ dirs[centre]
+    cos[centre] = -1.0
+    cos = cos[cos < 1.0 - 1e-12]  # repeated beams are no finer sampling
+    if len(cos) == 0:
+        return float("inf")
+    return float(spacing / np.tan(np.arccos(np.clip(cos.max(), -1.0, 1.0))))
+
+
+def modelling_standoff(sensor: RaySensor, spacing: float) -> float:
+    """The sensor distance of modelling views: the sensor's optimal distance, or nearer where
+    its beams would sample the surface more sparsely than ``spacing`` (the model's point
+    spacing R_r, Kriegel thesis Sec. 4.3.1), but no nearer than 1.25 x its minimum range.
+
+    A 160 x 120 camera over 58 degrees is 5.9 mm per pixel at the middle of a 0.2-1.5 m range:
+    a model sampled that sparsely stays full of holes, so its views come to 0.32 m. The
+    thesis' striper and a 640 x 480 camera are dense enough at their optimal distance.
+    """
+    optimal = float(sensor.optimal_distance)
+    nearest = min(optimal, 1.25 * float(sensor.min_range))
+    return float(max(nearest, min(optimal, beam_spacing_distance(sensor, spacing))))
 
 
 def footprint_width(ctx: PlanningContext, standoff: float) -> float:

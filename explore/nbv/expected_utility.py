@@ -16,7 +16,15 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3
-from explore.motion import MotionPlan, Rollouts, box_distance, follow_plan, rigid_clearances, rigid_first_hit
+from explore.motion import (
+    MotionPlan,
+    Rollouts,
+    box_distance,
+    follow_plan,
+    plan_controls,
+    rigid_clearances,
+    rigid_first_hit,
+)
 
 
 # -- the bound on k (Eq. 11-18) --------------------------------------------------------------
@@ -153,15 +161,6 @@ class ExpectedUtility:
     weights: Array = field(default_factory=lambda: np.zeros(0))  # eta P_i
     mean: float = 0.0  # plain sample mean of g_i (diagnostic)
     ess: float = 0.0  # effective sample size 1 / sum w_i^2 of the weights (k for equal weights)
-
-
-def plan_controls(robot: Any, plan: MotionPlan | np.ndarray) -> tuple[Array, np.ndarray]:
-    """Start state and per-``dt`` nominal controls of a plan (as ``robot.execute`` runs it)."""
-    if isinstance(plan, MotionPlan) and plan.controls is not None:
-        return np.asarray(plan.path[0], dtype=float), np.asarray(plan.controls, dtype=float)
-    path = plan.path if isinstance(plan, MotionPlan) else np.asarray(plan, dtype=float)
-    controls, _ = robot.controls_from_path(path)
-    return np.asarray(path[0], dtype=float), controls
 
 
 def _weighted_lengths(robot: Any, configs: np.ndarray) -> Array:

@@ -36,7 +36,16 @@ import numpy as np
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Pose
 from explore.mapping import GroundTruthMetrics, VoxelGrid
 from explore.motion import Capability, Execution
-from explore.nbv.candidates import STOP, Candidate, CandidateStack, Decision, PlanningContext, frame_from
+from explore.nbv.candidates import (
+    STOP,
+    Candidate,
+    CandidateStack,
+    Decision,
+    PlanningContext,
+    frame_from,
+    modelling_standoff,
+    standoff_for,
+)
 from explore.nbv.modelling_metrics import Evaluation
 from explore.nbv.modelling_planning import CandidatePlanning
 from explore.nbv.modelling_records import FALLBACK_PREFIX, ModellingResult, ScanRecord, resolve_strategy
@@ -86,6 +95,9 @@ class ModellingSession(Evaluation, CandidatePlanning):
     region : (min corner, max corner) of the box to model instead of the world's region (scene
         exploration models one cluster's box)
     obstacles : extra (lo, hi) boxes the planning treats as known environment (the rest of the scene)
+    standoff : sensor distance of the views (m); None: :func:`explore.nbv.modelling_standoff` (the
+        sensor's optimal distance, nearer for a sensor too coarse for the model's point spacing);
+        0: the sensor's optimal distance
     """
 
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
@@ -94,7 +106,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
                  fallback_generator: str | None = None, noise: bool = True, max_plan_attempts: int = 10,
                  place_first: bool | None = None, register_scans: bool = False,
                  region: tuple[Array, Array] | None = None,
-                 obstacles: Sequence[tuple[Array, Array]] = ()) -> None:
+                 obstacles: Sequence[tuple[Array, Array]] = (), standoff: float | None = None) -> None:
         from explore.mapping import PVS, SurfaceModel
 
         self.sim = sim
@@ -124,6 +136,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
             pvs=self.pvs, surface=self.surface, grid=self._snapshot(), sensor=self.sensor, robot=self.robot,
             region_min=region_min, region_max=region_max, environment_boxes=self._environment_boxes(),
             stack=self.stack, rng=self.rng_plan, registry=registry,
+            standoff=modelling_standoff(self.sensor, self.surface.point_spacing) if standoff is None else standoff,
         )
         self.records: list[ScanRecord] = []
         self.scans: list[Scan] = []
@@ -186,7 +199,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         options = [(z, x), (x, z), (-x, z), (y, z), (-y, z)]  # (outward normal, sweep)
         options += [((s * x + z) / np.sqrt(2), y) for s in (1, -1)] + [((s * y + z) / np.sqrt(2), x) for s in (1, -1)]
         options += [((sx * x + sy * y) / np.sqrt(2), z) for sx in (1, -1) for sy in (1, -1)]
-        standoff = float(self.sensor.optimal_distance)
+        standoff = standoff_for(self.ctx)
         targets: list[Pose | ScanPath] = []
         for normal, sweep in options:
             depth = float(np.abs(normal) @ half)

@@ -45,10 +45,10 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Pose, validate_params, wrap_angle
-from explore.motion import Capability, Execution, MotionPlan, MotionProblem, follow_plan
+from explore.motion import Capability, Execution, MotionProblem, execute_following
 from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import PlanningContext
-from explore.nbv.expected_utility import ObstacleField, plan_controls
+from explore.nbv.expected_utility import ObstacleField
 from explore.nbv.nbvs_report import Reporting
 from explore.nbv.nbvs_sampling import StateSampling
 from explore.nbv.nbvs_scoring import Scoring
@@ -199,15 +199,8 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         """Run the plan with positioning noise as the rollouts do (open loop or re-localising);
         collisions are checked in the TRUE world."""
         assert state.plan is not None
-        start, controls = plan_controls(self.robot, state.plan)
-        done = follow_plan(self.robot, start, controls, self.rng_exec if self.noise else None, 1, self.relocalise,
-                           self.leg_length, keep_controls=True)
-        assert done.applied is not None and done.commands is not None
-        run = self.robot.execute(MotionPlan(done.configs[0], controls=done.applied[0], dt=float(self.robot.dt)),
-                                 None, noise=False, world="true")
-        n = len(run.controls)  # fewer when a collision stopped the motion
-        run.controls, run.noise = done.commands[0][:n], (done.applied[0] - done.commands[0])[:n]
-        run.log_prob = float(done.log_prob[0])
+        run = execute_following(self.robot, state.plan, self.rng_exec if self.noise else None, self.relocalise,
+                                self.leg_length)
         self.executions.append(run)
         self.q = np.asarray(run.final, dtype=float).copy()
         if self.robot.base_dofs:  # the heading is periodic: keep it in [-pi, pi) (within the limits)

@@ -43,12 +43,14 @@ from explore.core import Array, Pose, wrap_angle
 from explore.motion import (
     BLOCK_OCCUPIED,
     BLOCK_UNKNOWN,
+    BodyFreeSpace,
     Capability,
     Execution,
     MotionPlan,
     MotionProblem,
     ScanPathIK,
     classify_blocked,
+    execute_following,
     linear_scan_path_ik,
     path_is_valid,
     path_length,
@@ -173,6 +175,14 @@ class ScanMotion:
     rng : random generator for IK restarts and the positioning noise
     plan_seed : first OMPL seed (each planning call uses the next one: deterministic runs)
     noise : execute with the robot's positioning noise model
+    relocalise : a mobile base localises while it executes and steers back onto the plan
+        (:func:`explore.motion.execute_following`, as a path-following controller would);
+        False: open loop, whose heading errors add up over the whole approach (Vasquez-Gomez
+        Sec. A6: decimetres after a few metres, which bumps the base into the table)
+    leg_length : with ``relocalise``, a drive is re-aimed every this many metres
+    drive_margin : with noise, a mobile base keeps this far from the known environment while it
+        drives, away from the drive's ends (:class:`explore.motion.PlanarChecker`'s funnel; a leg
+        of 0.25 m drifts centimetres sideways)
     step : length of a scan-path portion (thesis: 10 mm)
     min_scan_share : shortest acceptable part of a partly reachable scan path
     """
@@ -183,13 +193,20 @@ class ScanMotion:
     rng: np.random.Generator
     plan_seed: int = 1
     noise: bool = True
+    relocalise: bool = True
+    leg_length: float = 0.25
+    drive_margin: float = 0.1
     step: float = 0.01
     min_scan_share: float = 0.5
     plans: list[PlanRecord] = field(default_factory=list)
     motions: list[MotionRecord] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        self.problem = MotionProblem(self.robot, space_free=self.pvs.is_free)
+        self.free_space = BodyFreeSpace(self.pvs)  # the PVS, and where the robot has stood is free
+        noisy_base = self.noise and bool(self.robot.base_dofs)
+        self.problem = MotionProblem(self.robot, space_free=self.free_space.is_free,
+                                     drive_margin=max(self.drive_margin, self.robot.drive_clearance) if noisy_base
+                                     else None)
         self._calls = 0
         self._capability: CapabilityMap | None = None
 
@@ -274,7 +291,7 @@ class ScanMotion:
                 return ScanPlan(candidate, UNREACHABLE, "base heading outside the joint limits")
             configs = shifted
         if not all(problem.is_valid(q) for q in configs):
-            verdict = (classify_blocked(robot, configs, self.pvs.probability, space_free=self.pvs.is_free)
+            verdict = (classify_blocked(robot, configs, self.pvs.probability, space_free=self.free_space.is_free)
                        if problem.space_free is not None else None)
             if verdict == BLOCK_OCCUPIED:
                 return ScanPlan(candidate, OCCUPIED, "the scan runs through occupied space", None, configs)
@@ -286,6 +303,9 @@ class ScanMotion:
         if start is None:
             return plan
         self._calls += 1
+        escape = None if problem.is_valid(start) else self._escape(start, problem)
+        if escape is not None:
+            start = escape.path[-1]
         approach = self.planner.plan(problem, start, configs[0], seed=self.plan_seed + self._calls)
         if approach is None:
             plan.verdict, plan.reason = NO_PATH, f"no collision-free motion to the scan start ({self.planner_name})"
@@ -295,8 +315,33 @@ class ScanMotion:
             if approach is None:
                 plan.verdict, plan.reason = NO_PATH, "the base cannot follow the path without a collision"
                 return plan
+        if escape is not None:
+            approach = _joined(escape, approach, robot)
         plan.approach, plan.reason = approach, f"{approach.planner}: {approach.length:.3f}"
         return plan
+
+    def _escape(self, start: Array, problem: MotionProblem, tries: int = 64) -> MotionPlan | None:
+        """A small motion out of a configuration the planner calls invalid, if one is valid at zero
+        clearance all along (MoveIt's FixStartStateCollision): positioning noise can leave the robot
+        nearer the known environment than the planning clearance without touching it, and no motion
+        starts from there. Configurations within 1-4 steps (2 cm / 0.03 rad of the base, 0.02 rad of
+        a joint), nearest first; None if none will do."""
+        robot = self.robot
+        rng = np.random.default_rng(self.plan_seed + self._calls)
+        step = np.full(len(start), 0.02)
+        base = list(robot.base_dofs)
+        if base:
+            step[base] = (0.02, 0.02, 0.03)
+        for radius in (1, 2, 3, 4):
+            nearby = start + radius * step * rng.uniform(-1.0, 1.0, (tries, len(start)))
+            for q in nearby[np.argsort([robot.distance(start, q) for q in nearby], kind="stable")]:
+                if not problem.is_valid(q):
+                    continue
+                controls, rolled = robot.controls_from_path(np.vstack([start, q]))
+                if all(problem.is_valid(x, margin=0.0) for x in rolled[1:]):
+                    return MotionPlan(rolled, controls=controls, dt=float(robot.dt), planner="escape",
+                                      length=path_length(robot, rolled))
+        return None
 
     def _drivable(self, approach: MotionPlan, problem: MotionProblem) -> MotionPlan | None:
         """The velocity controls a base executes for a geometric path (a differential drive turns,
@@ -385,7 +430,11 @@ class ScanMotion:
 
     def _run(self, plan: MotionPlan | np.ndarray, kind: str, scan_index: int) -> Execution:
         robot = self.robot
-        run = robot.execute(plan, self.rng, noise=self.noise, world="true")
+        if self.relocalise and robot.base_dofs:
+            run = execute_following(robot, plan, self.rng if self.noise else None, True, self.leg_length)
+        else:
+            run = robot.execute(plan, self.rng, noise=self.noise, world="true")
+        self.free_space.stand(robot.link_points(run.final, within=(self.pvs.min_corner, self.pvs.max_corner)))
         positions = np.array([robot.fk(q)[:3, 3] for q in run.configs]) if len(run.configs) else np.zeros((0, 3))
         sensor_path = float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum()) if len(positions) > 1 else 0.0
         config_length = float(sum(robot.distance(a, b) for a, b in zip(run.configs[:-1], run.configs[1:], strict=True)))
@@ -433,3 +482,14 @@ def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--plann
     if isinstance(planner, str):
         return registry.create("motion_planner", planner, params or {}, source, "planner")
     return planner
+
+
+def _joined(first: MotionPlan, second: MotionPlan, robot: Any) -> MotionPlan:
+    """One plan: ``first`` then ``second`` (which starts where ``first`` ends)."""
+    path = np.vstack([first.path, second.path[1:]])
+    if second.controls is None:
+        return MotionPlan(path, planner=f"{first.planner}+{second.planner}", length=path_length(robot, path),
+                          planning_time=second.planning_time)
+    return MotionPlan(path, controls=np.vstack([first.controls, second.controls]), dt=float(robot.dt),
+                      planner=f"{first.planner}+{second.planner}", length=path_length(robot, path),
+                      planning_time=second.planning_time)

@@ -48,7 +48,7 @@ class ObjectModelling:
             **strategy.termination_params, "coverage": settings.model_coverage, "n_abort": settings.model_scans + seen})
         session = ModellingSession(scene.sim, strategy, scene.registry, seed=scene.settings.seed + 7919 * (obj.id + 1),
                                    max_scans=scene.settings.model_scans + seen, region=(lo, hi), obstacles=others,
-                                   fallback_generator=None)
+                                   fallback_generator=None, standoff=0.0)  # as the scene's views
         scene.modelling_sessions[obj.id] = session
         obj.status = MODELLING
         obj.note(f"modelling in box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}")
