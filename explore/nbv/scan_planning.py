@@ -22,12 +22,15 @@ Sec. 2 "motion planning" and Sec. 4.5.2; Kriegel et al. IROS 2012 Sec. B6):
 Before the first scan the PVS holds no information at all (everything is unknown), so the
 initial scan is planned against the known environment alone (``use_pvs=False``): the thesis
 gives the initial scan path rather than planning it, and a robot whose start posture lies
-inside the region of interest could not move otherwise.
+inside the region of interest could not move otherwise. The voxels the robot's body has stood
+in count as free (:class:`explore.motion.BodyFreeSpace`), and a robot that noise left inside the
+planning clearance (not touching anything) first backs out of it (:meth:`ScanMotion._escape`).
 
 :class:`ScanMotion` also executes plans: :meth:`ScanMotion.execute_approach` and
 :meth:`ScanMotion.execute_scan` call ``robot.execute`` (positioning noise, collision events
-against the TRUE world) and turn the executed configurations into the sensor target the
-scan is acquired from. Ground truth is never used for planning.
+against the TRUE world; a mobile base re-localises and steers back onto its plan,
+:func:`explore.motion.execute_following`) and turn the executed configurations into the sensor
+target the scan is acquired from. Ground truth is never used for planning.
 """
 
 from __future__ import annotations
