@@ -226,7 +226,7 @@ def modelling_standoff(sensor: RaySensor, spacing: float) -> float:
     spacing R_r, Kriegel thesis Sec. 4.3.1), but no nearer than 1.25 x its minimum range.
 
     A 160 x 120 camera over 58 degrees is 5.9 mm per pixel at the middle of a 0.2-1.5 m range:
-    a model sampled that sparsely stays full of holes, so its views come to 0.32 m. The
+    a model sampled that sparsely stays full of holes, so its views come to 0.29 m. The
     thesis' striper and a 640 x 480 camera are dense enough at their optimal distance.
     """
     optimal = float(sensor.optimal_distance)
