@@ -31,6 +31,8 @@ class StartModelling(ExploreBehaviour):
         Param("resolution", float, 0.005, "m", "PVS voxel edge length", low=1e-4),
         Param("max_scans", int, 30, "", "scan budget (overridden by --max-scans)", low=1),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise model"),
+        Param("relocalise", bool, True, "", "a mobile base re-localises while it executes a motion and steers back "
+              "onto it; false: open loop, as Vasquez-Gomez et al. execute (errors add up over a whole approach)"),
         Param("max_plan_attempts", int, 10, "", "candidates tried per scan when planning the best fails", low=1),
         Param("fallback", str, "auto", "", "view generator tried when no candidate of the strategy is left or "
               "can be reached; auto = reachable (views of the robot's own configurations) for an arm on a fixed "
@@ -67,6 +69,7 @@ class StartModelling(ExploreBehaviour):
             max_scans=config.max_scans or self.p["max_scans"],
             planner=(config.planner, config.scoped("planner")),
             noise=self.p["noise"],
+            relocalise=self.p["relocalise"],
             max_plan_attempts=self.p["max_plan_attempts"],
             fallback_generator=self._fallback(ctx.sim.robot, ctx.registry),
             continue_after_stop=self.p["continue_after_stop"],

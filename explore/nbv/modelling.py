@@ -44,7 +44,6 @@ from explore.nbv.candidates import (
     PlanningContext,
     frame_from,
     modelling_standoff,
-    standoff_for,
 )
 from explore.nbv.modelling_metrics import Evaluation
 from explore.nbv.modelling_planning import CandidatePlanning
@@ -86,6 +85,8 @@ class ModellingSession(Evaluation, CandidatePlanning):
         Its scans are recorded with the source ``fallback_<name>`` and counted in
         ``metrics()["fallback_scans"]``.
     noise : execute motions with the robot's positioning noise model (Vasquez-Gomez Sec. A6)
+    relocalise : a mobile base re-localises while it executes and steers back onto the plan
+        (:class:`explore.nbv.scan_planning.ScanMotion`); False: open loop
     max_plan_attempts : candidates tried per iteration when planning the best one fails
     place_first : put the robot at the first scan instead of planning a motion to it (the
         thesis' free-flying sensor starts at its random initial scan path); None = only for
@@ -103,7 +104,8 @@ class ModellingSession(Evaluation, CandidatePlanning):
     def __init__(self, sim: Any, strategy: Any, registry: Any, seed: int = 0, resolution: float = 0.005,
                  max_scans: int = 30, planner: Any = None, continue_after_stop: bool = False,
                  pvs_params: dict | None = None, surface_params: dict | None = None,
-                 fallback_generator: str | None = None, noise: bool = True, max_plan_attempts: int = 10,
+                 fallback_generator: str | None = None, noise: bool = True, relocalise: bool = True,
+                 max_plan_attempts: int = 10,
                  place_first: bool | None = None, register_scans: bool = False,
                  region: tuple[Array, Array] | None = None,
                  obstacles: Sequence[tuple[Array, Array]] = (), standoff: float | None = None) -> None:
@@ -155,7 +157,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         self.place_first = self.robot.has(Capability.FREE_FLYER) if place_first is None else place_first
         self.motion = ScanMotion(self.robot, self.pvs, make_planner(registry, self.robot, planner),
                                  np.random.default_rng(rng.integers(2**63)), int(rng.integers(1, 2**31 - 1)),
-                                 noise=bool(noise))
+                                 noise=bool(noise), relocalise=bool(relocalise))
         self.planner = self.motion.planner
         self.plan_failure = ""
         self._new_pending()
@@ -191,7 +193,9 @@ class ModellingSession(Evaluation, CandidatePlanning):
     def _initial_options(self) -> list[Pose | ScanPath]:
         """Scans along the 5 sides and 8 edges of the region box (thesis Sec. 4.7).
 
-        The bottom side and bottom edges are left out (they overlap the pedestal).
+        The bottom side and bottom edges are left out (they overlap the pedestal). They stand at
+        the sensor's optimal distance, not the (possibly nearer) modelling standoff: the first
+        scan is to see the whole region.
         """
         lo, hi = self.ctx.region_min, self.ctx.region_max
         centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -199,7 +203,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         options = [(z, x), (x, z), (-x, z), (y, z), (-y, z)]  # (outward normal, sweep)
         options += [((s * x + z) / np.sqrt(2), y) for s in (1, -1)] + [((s * y + z) / np.sqrt(2), x) for s in (1, -1)]
         options += [((sx * x + sy * y) / np.sqrt(2), z) for sx in (1, -1) for sy in (1, -1)]
-        standoff = standoff_for(self.ctx)
+        standoff = float(self.sensor.optimal_distance)
         targets: list[Pose | ScanPath] = []
         for normal, sweep in options:
             depth = float(np.abs(normal) @ half)

@@ -28,6 +28,7 @@ from explore.perception.fusion import FusedPose, fuse_poses
 from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model, accepted, rivals, surface_distances
 from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
 from explore.perception.incremental_graph import IncrementalPoseGraph, LikelihoodField
+from explore.perception.model_data import ModelCloud, model_cloud
 from explore.perception.normals import estimate_normals
 from explore.perception.plane_icp import as_2d_transform, plane_frame, plane_icp
 from explore.perception.pose_graph import PoseGraph, PoseGraphResult, pose_graph_from_scans, rebase_scan, sigmas6
@@ -45,10 +46,14 @@ from explore.perception.segmentation import (
     ransac_iterations,
 )
 from explore.perception.validation import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
-from explore.perception.verification import render_and_compare
+from explore.perception.verification import icp_refine, inlier_fraction, render_and_compare
 from explore.perception.vfh import VFHRecognizer, vfh_signature
 
 __all__ = [
+    "icp_refine",
+    "inlier_fraction",
+    "ModelCloud",
+    "model_cloud",
     "ACCEPT_FROM",
     "Cloud",
     "Cluster",

@@ -12,14 +12,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core import invert, pose_error, transform_points
+from explore.core import Pose, invert, pose_error, transform_points
 from explore.perception import (
     ACCEPT_FROM,
     Q_H_MIN,
     Cluster,
     FusedPose,
     Hypothesis,
+    ModelCloud,
     fuse_poses,
+    icp_refine,
+    inlier_fraction,
+    model_cloud,
     rivals,
 )
 from explore.scene.scene_objects import (
@@ -39,6 +43,7 @@ class Recognition:
 
     def __init__(self, scene: SceneSession) -> None:
         self.scene = scene
+        self._clouds: dict[str, ModelCloud] = {}  # model name -> its cloud for refinement
 
     # -- recognition and validation -------------------------------------------------------------
     def recognition_cluster(self, obj: SceneObject) -> Cluster:
@@ -156,7 +161,8 @@ class Recognition:
         if not check.accepted:
             obj.note(f"{len(fused.members)} views agree on {name}, but the PVS rejects the fused pose")
             return False
-        obj.model, obj.pose, obj.fused, obj.status = name, fused.pose, fused, RECOGNISED
+        obj.model, obj.fused, obj.status = name, fused, RECOGNISED
+        obj.pose = self.refined(obj, fused.pose)
         obj.q_h = float(np.mean([mine[i].q_h for i in fused.members]))
         obj.v_h = float(check.score)
         obj.note(f"recognised as {name} by {len(fused.members)} agreeing views (no merged hypothesis survived)")
@@ -295,6 +301,24 @@ class Recognition:
             return True
         return False
 
+    def refined(self, obj: SceneObject, pose: Pose) -> Pose:
+        """A fused pose ICP-refined on the object's points from its recognition views together
+        (each single view saw a mug's handle only in part, and their average can be degrees off);
+        kept only if no one of those views then has 5 points fewer of its share within 3 mm of the
+        model (views that a noisy base left misregistered pull the joint fit off: on the patrol's
+        mug one view fell from 83 to 70 %, while on the free flyer's the worst fell by 1 point)."""
+        mesh = next(m.mesh for m in self.scene.models if m.name == obj.model)
+        if obj.model not in self._clouds:
+            self._clouds[obj.model] = model_cloud(mesh, 0.003)
+        cloud = self._clouds[obj.model]
+        cluster = self.recognition_cluster(obj)
+        refined, _, _ = icp_refine(cluster.points, cloud, pose, distances=(0.005, 0.003))
+        for view in np.unique(cluster.views):
+            points = cluster.points[cluster.views == view]
+            if inlier_fraction(points, cloud, refined, 0.003) < inlier_fraction(points, cloud, pose, 0.003) - 0.05:
+                return pose
+        return refined
+
     def _settle_ambiguous(self, obj: SceneObject) -> None:
         """Out of views: keep the fused pose if enough views agree, or if the robot could not reach a
         confirming view and the validated hypothesis has no rival (Kriegel's single-view
@@ -305,7 +329,7 @@ class Recognition:
         agreed = obj.fused is not None and len(obj.fused.members) >= scene.settings.multi_view_agree
         unconfirmed = obj.fused is not None and not obj.rivals
         if agreed or unconfirmed:
-            obj.pose = obj.fused.pose
+            obj.pose = self.refined(obj, obj.fused.pose)
             obj.status = RECOGNISED
             obj.note("recognised by the fused per-view poses" if agreed else
                      f"recognised from {len(obj.fused.members)} view(s): no confirming view was reachable")
