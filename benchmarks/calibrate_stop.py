@@ -94,13 +94,22 @@ def main() -> None:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
-    runs = [r for r in json.loads(args.runs.read_text()) if r.get("coverage_off_support")]
+    try:
+        runs = [r for r in json.loads(args.runs.read_text()) if r.get("coverage_off_support")]
+    except (OSError, ValueError, AttributeError, TypeError) as error:
+        parser.error(f"{args.runs}: not a reproduce_kriegel.py --runs-json file ({error})")
     fit = [r for r in runs if r["seed"] in seeds_of(args.fit)]
     check = [r for r in runs if r["seed"] in seeds_of(args.check)]
+    if not check or not (fit or args.rule):
+        seeds = sorted({r["seed"] for r in runs})
+        parser.error(f"{args.runs}: no runs of seeds {args.check if not check else args.fit} (it has seeds {seeds})")
     if args.rule:
-        rule = tuple(float(v) for v in args.rule.split(","))
+        try:
+            rule = tuple(float(v) for v in args.rule.split(","))
+        except ValueError:
+            rule = ()
         if len(rule) != 3:
-            parser.error("--rule: three numbers T,E,S")
+            parser.error(f"--rule: three numbers T,E,S, got {args.rule!r}")
         fit = check
     else:
         rule = search(fit, args.target, args.density, args.fallback, args.no_off_support)

@@ -341,7 +341,7 @@ class ScanMotion:
                 if not problem.is_valid(q):
                     continue
                 controls, rolled = robot.controls_from_path(np.vstack([start, q]))
-                if all(problem.is_valid(x, margin=0.0) for x in rolled[1:]):
+                if path_is_valid(problem, rolled[1:], resolution=np.inf, margin=0.0):
                     return MotionPlan(rolled, controls=controls, dt=float(robot.dt), planner="escape",
                                       length=path_length(robot, rolled))
         return None
@@ -490,9 +490,7 @@ def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--plann
 def _joined(first: MotionPlan, second: MotionPlan, robot: Any) -> MotionPlan:
     """One plan: ``first`` then ``second`` (which starts where ``first`` ends)."""
     path = np.vstack([first.path, second.path[1:]])
-    if second.controls is None:
-        return MotionPlan(path, planner=f"{first.planner}+{second.planner}", length=path_length(robot, path),
-                          planning_time=second.planning_time)
-    return MotionPlan(path, controls=np.vstack([first.controls, second.controls]), dt=float(robot.dt),
-                      planner=f"{first.planner}+{second.planner}", length=path_length(robot, path),
-                      planning_time=second.planning_time)
+    controls = None if second.controls is None else np.vstack([first.controls, second.controls])
+    return MotionPlan(path, controls=controls, dt=float(robot.dt) if controls is not None else 0.0,
+                      planner=f"{first.planner}+{second.planner}", planning_time=second.planning_time,
+                      length=first.length + second.length)

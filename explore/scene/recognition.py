@@ -307,8 +307,8 @@ class Recognition:
         kept only if no one of those views then has 5 points fewer of its share within 3 mm of the
         model (views that a noisy base left misregistered pull the joint fit off: on the patrol's
         mug one view fell from 83 to 70 %, while on the free flyer's the worst fell by 1 point)."""
-        mesh = next(m.mesh for m in self.scene.models if m.name == obj.model)
         if obj.model not in self._clouds:
+            mesh = next(m.mesh for m in self.scene.models if m.name == obj.model)
             self._clouds[obj.model] = model_cloud(mesh, 0.003)
         cloud = self._clouds[obj.model]
         cluster = self.recognition_cluster(obj)
