@@ -120,7 +120,7 @@ def warm_up() -> None:
 
 def run_one(job: tuple) -> dict:
     """One modelling run; returns its metrics (plus run time)."""
-    world, strategy, seed, max_scans, overrides, fallback, threads, profile, missing = job
+    world, strategy, seed, max_scans, overrides, fallback, threads, sensor_params, missing = job
     if threads:
         import numba
 
@@ -133,9 +133,9 @@ def run_one(job: tuple) -> dict:
     warm_up()
     params = {"utility_params": overrides} if overrides else {}
     spec = load_world_spec(world)
-    if profile:
+    if sensor_params:
         spec = dataclasses.replace(spec, sensor=dataclasses.replace(
-            spec.sensor, params={**spec.sensor.params, "profile": profile}))
+            spec.sensor, params={**spec.sensor.params, **sensor_params}))
     with Simulation(spec, registry) as sim:
         session = ModellingSession(sim, (strategy, params), registry, seed=seed, max_scans=max_scans,
                                    continue_after_stop=True, fallback_generator=fallback)
@@ -331,6 +331,8 @@ def main(argv: list[str] | None = None) -> int:
                              "its scans are reported in the fallback column")
     parser.add_argument("--profile", default="", help="the sensor's profile (e.g. triangulation; default: the "
                         "world's own)")
+    parser.add_argument("--sensor-param", action="append", default=[], metavar="KEY=VALUE",
+                        help="a sensor parameter over the profile's, e.g. camera_shadow=false (repeatable)")
     parser.add_argument("--jobs", type=int, default=1, help="runs in parallel (each with one numba thread)")
     parser.add_argument("--quick", action="store_true",
                         help="bunny only, seeds 0-2, 3 strategies, 12 scans (a few minutes)")
@@ -361,14 +363,21 @@ def main(argv: list[str] | None = None) -> int:
             worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names, set_file)]
         except ValueError as error:
             parser.error(str(error))
-    if args.profile:
+    sensor_params = {"profile": args.profile} if args.profile else {}
+    for item in args.sensor_param:
+        if "=" not in item:
+            parser.error(f"--sensor-param: KEY=VALUE expected, got {item!r}")
+        key, value = item.split("=", 1)
+        sensor_params[key] = value
+    if sensor_params:
         from explore.core import BadInput
         from explore.sim import load_world_spec
 
         for world in worlds:
             try:
                 sensor = load_world_spec(world).sensor
-                registry.create("sensor", sensor.plugin, {**sensor.params, "profile": args.profile}, "--profile")
+                registry.create("sensor", sensor.plugin, {**sensor.params, **sensor_params},
+                                "--profile" if list(sensor_params) == ["profile"] else "--sensor-param")
             except BadInput as error:
                 parser.error(str(error))
     if args.missing:
@@ -390,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
     threads = 1 if args.jobs > 1 else 0
     jobs = [(world, strategy, seed, max_scans,
              utility_overrides(registry, strategy, args.variant, args.normalise, args.hierarchy), fallback, threads,
-             args.profile, args.missing)
+             sensor_params, args.missing)
             for world in worlds for strategy in strategies for seed in seeds]
 
     def report(metrics: dict) -> None:
