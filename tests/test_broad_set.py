@@ -70,3 +70,20 @@ def test_the_missing_surface_picture_counts_coverage_as_the_library(tmp_path: Pa
     assert share == pytest.approx(coverage(model, observable, 0.003))
     assert 0.6 < share < 0.75
     assert (tmp_path / "missing.png").stat().st_size > 10_000
+
+
+def test_a_sensor_parameter_of_the_benchmark_reaches_the_sensor_and_a_bad_one_is_one_line() -> None:
+    import subprocess
+
+    from reproduce_kriegel import run_one
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "reproduce_kriegel.py"
+    bad = subprocess.run([sys.executable, str(script), "--worlds", "bunny_pedestal", "--seeds", "0",
+                          "--sensor-param", "camera_shadow=maybe"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2
+    assert bad.stderr.strip().splitlines()[-1].endswith("camera_shadow: expected true or false, got 'maybe'")
+    job = ("bunny_pedestal", "ig_quality/bs_hr", 0, 2, {}, None, 1, {"profile": "triangulation"}, "")
+    shadowed = run_one(job)["coverage"]
+    unshadowed = run_one(job[:7] + ({"profile": "triangulation", "camera_shadow": "false"}, ""))["coverage"]
+    assert len(shadowed) == len(unshadowed) == 2
+    assert unshadowed[0] > shadowed[0]  # the camera's shadow costs returns in the same first scan
