@@ -363,14 +363,14 @@ def main(argv: list[str] | None = None) -> int:
             worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names, set_file)]
         except ValueError as error:
             parser.error(str(error))
+    from explore.core import BadInput, parse_assignment
+
     sensor_params = {"profile": args.profile} if args.profile else {}
-    for item in args.sensor_param:
-        if "=" not in item:
-            parser.error(f"--sensor-param: KEY=VALUE expected, got {item!r}")
-        key, value = item.split("=", 1)
-        sensor_params[key] = value
+    try:
+        sensor_params.update(parse_assignment(item) for item in args.sensor_param)
+    except BadInput as error:
+        parser.error(f"--sensor-param: {error.field}: {error.message}")
     if sensor_params:
-        from explore.core import BadInput
         from explore.sim import load_world_spec
 
         for world in worlds:
