@@ -74,6 +74,43 @@ def test_unknown_space_blocks_a_path_until_observed_free(workcell, endpoints) ->
     assert classify_blocked(robot, b[None], pvs.probability, space_free=pvs.is_free) == "free"
 
 
+def test_the_robot_surface_between_its_samples_keeps_the_clearance_from_the_pvs(workcell, endpoints) -> None:
+    """An occupied voxel where the arm's surface lies between its 3 cm samples: without a margin for
+    the gaps the samples' voxels are free and far enough, and the configuration passes although the
+    arm touches the voxel; with the robot's ``space_margin`` (clearance + measured sample gap) it fails."""
+    from scipy.spatial import cKDTree
+
+    from explore.mapping import PVS
+
+    robot = workcell.robot
+    _, b = endpoints
+    tip = robot.fk(b)[:3, 3]
+    pvs = PVS(tip - 0.15, tip + 0.15, 0.01)
+    pvs.log_odds[:] = -5.0  # all observed free
+    box = (pvs.min_corner, pvs.max_corner)
+    samples = robot.link_points(b, within=box)
+    dense = robot.link_points(b, within=box, spacing=0.005)
+    dense = dense[np.all((dense > pvs.min_corner + 0.02) & (dense < pvs.max_corner - 0.02), axis=1)]
+    gap, _ = cKDTree(samples).query(dense)
+    assert robot.point_spacing <= robot.sample_gap <= 1.5 * robot.point_spacing
+    assert gap.max() <= robot.sample_gap + 1e-9
+    touched = dense[np.argmax(gap)]  # the surface point farthest from every sample (about 2.5 cm)
+    ijk, _ = pvs.index(touched[None])
+    pvs.log_odds[tuple(ijk[0])] = 5.0
+    pvs.version += 1
+    assert MotionProblem(robot, space_free=pvs.is_free, space_margin=0.0).is_valid(b)  # the old test misses it
+    problem = MotionProblem(robot, space_free=pvs.is_free)
+    assert problem.space_margin == pytest.approx(robot.clearance + robot.sample_gap)
+    assert not problem.is_valid(b)
+    margin = problem.space_margin
+    verdict = classify_blocked(robot, b[None], pvs.probability, space_free=pvs.is_free, space_margin=margin)
+    assert verdict == "occupied"  # the samples' own voxels are free, the one within the margin is not
+    pvs.log_odds[tuple(ijk[0])] = 0.0  # unknown instead: the candidate waits
+    pvs.version += 1
+    verdict = classify_blocked(robot, b[None], pvs.probability, space_free=pvs.is_free, space_margin=margin)
+    assert verdict == "unknown"
+
+
 def test_the_space_the_robot_stood_in_is_free_for_planning(workcell, endpoints) -> None:
     """Unknown space around the arm blocks the configuration it stands in until it is recorded as
     the robot's own volume; the PVS itself is unchanged and a cached motion is invalidated."""

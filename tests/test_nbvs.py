@@ -96,6 +96,33 @@ def test_rollout_collisions_match_a_test_of_every_sample_at_every_step(cluttered
     assert len(nominal) > 40 and moves <= 6
 
 
+def test_rollouts_keep_the_robot_margin_from_the_pvs(cluttered) -> None:
+    """A PVS wall 6 cm beside the base's flank: its 3 cm surface samples alone would pass every open-loop
+    rollout, the robot's ``space_margin`` (clearance + sample gap) rejects most; the rigid kernel and the
+    point-by-point test agree with and without it."""
+    from explore.mapping import PVS
+
+    robot = cluttered.robot
+    path = _drive_past_chair(robot, 0.3)
+    flank = float(robot.link_points(path[0])[:, 1].min())
+    pvs = PVS(np.array([0.8, flank - 0.12, 0.0]), np.array([1.8, flank + 0.08, 0.6]), 0.01)
+    pvs.log_odds[:] = -5.0
+    ijk = np.argwhere(np.ones(pvs.shape, dtype=bool))
+    pvs.log_odds[tuple(ijk[pvs.centers(ijk)[:, 1] < flank - 0.06].T)] = 5.0
+    pvs.version += 1
+    start, controls = plan_controls(robot, MotionPlan(path))
+    rollouts = follow_plan(robot, start, controls, np.random.default_rng(3), 12, False)
+    flagged = {}
+    for margin in (robot.space_margin, 0.0):
+        field = ObstacleField.from_sim(cluttered, pvs)
+        field.space_margin = margin
+        brute = np.array([any(field.clearance(robot.link_points(q)).min() < 0.0 for q in sample[1:])
+                          for sample in rollouts.configs])
+        assert np.array_equal(colliding_rollouts(robot, rollouts, field), brute)
+        flagged[margin] = int(brute.sum())
+    assert flagged[0.0] == 0 and flagged[robot.space_margin] >= 6
+
+
 def test_expected_utility_weights_by_probability(cluttered) -> None:
     robot = cluttered.robot
     plan = MotionPlan(_drive_past_chair(robot, 1.0))

@@ -61,6 +61,7 @@ class BulletRobot(Robot):
         self._points_at: dict[float, list[tuple[Part, Points3]]] = {}
         self._com_offset: dict[int, Pose] = {}
         self._state: Array | None = None
+        self._sample_gap: float | None = None
 
     # -- geometry ----------------------------------------------------------------------------
     @property
@@ -96,6 +97,22 @@ class BulletRobot(Robot):
         """Points on every part's geometry (``point_spacing`` apart), in the part's link frame."""
         self._local_points = self._part_point_sets(self.point_spacing)
         self._points_at = {float(self.point_spacing): self._local_points}
+        self._sample_gap = None
+
+    @property
+    def sample_gap(self) -> float:
+        """Measured once: the largest distance from a dense sampling of each part's surface (a sixth
+        of ``point_spacing`` apart) to the part's nearest link point (about 1.1 x ``point_spacing``)."""
+        if self._sample_gap is None:
+            from scipy.spatial import cKDTree
+
+            dense = self._part_point_sets(self.point_spacing / 6.0)
+            gap = 0.0
+            for (_, sparse), (_, fine) in zip(self._local_points, dense, strict=True):
+                if len(sparse) and len(fine):
+                    gap = max(gap, float(cKDTree(sparse).query(fine)[0].max()))
+            self._sample_gap = gap
+        return self._sample_gap
 
     def _part_point_sets(self, spacing: float) -> list[tuple[Part, Points3]]:
         """(part, points in its link frame) on every part's visual geometry and extra meshes."""

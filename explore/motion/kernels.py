@@ -61,11 +61,12 @@ def planar_points_clearance(
 def point_clearance(
     x: float, y: float, z: float, lo: np.ndarray, hi: np.ndarray, margin: float, field: np.ndarray,
     lattice: np.ndarray, resolution: float, half_diagonal: float, grid_lo: np.ndarray, grid_hi: np.ndarray,
+    space_margin: float,
 ) -> float:
     """Clearance of one point as ``explore.nbv.nbvs.ObstacleField.clearance`` (< 0: collision).
 
     Boxes: the signed distance to the nearest box (negative inside) minus ``margin``. PVS (``field`` not empty): inside
-    the grid the distance field minus ``half_diagonal``, outside the distance to the grid box.
+    the grid the distance field minus ``half_diagonal`` and ``space_margin``, outside the distance to the grid box.
     """
     best = np.inf
     for b in range(lo.shape[0]):
@@ -83,7 +84,7 @@ def point_clearance(
         iy = int(math.floor(y * inv)) - lattice[1]
         iz = int(math.floor(z * inv)) - lattice[2]
         if 0 <= ix < field.shape[0] and 0 <= iy < field.shape[1] and 0 <= iz < field.shape[2]:
-            pvs = field[ix, iy, iz] - half_diagonal
+            pvs = field[ix, iy, iz] - half_diagonal - space_margin
         else:
             gx, gy = _gap(x, grid_lo[0], grid_hi[0]), _gap(y, grid_lo[1], grid_hi[1])
             gz = _gap(z, grid_lo[2], grid_hi[2])
@@ -97,7 +98,7 @@ def point_clearance(
 def rigid_clearances(
     local: np.ndarray, bx: float, by: float, btheta: float, lo: np.ndarray, hi: np.ndarray, margin: float,
     field: np.ndarray, lattice: np.ndarray, resolution: float, half_diagonal: float, grid_lo: np.ndarray,
-    grid_hi: np.ndarray,
+    grid_hi: np.ndarray, space_margin: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
     """Robot points ``local`` (n, 3, base frame) at base pose (bx, by, btheta): their world x, y, a
     lower bound on each point's clearance, the points' largest distance R from the base axis and
@@ -115,7 +116,7 @@ def rigid_clearances(
         if r > radius:
             radius = r
         clear[p] = point_clearance(wx[p], wy[p], local[p, 2], lo, hi, margin, field, lattice, resolution,
-                                   half_diagonal, grid_lo, grid_hi)
+                                   half_diagonal, grid_lo, grid_hi, space_margin)
         if field.shape[0] > 0:
             clear[p] -= half_diagonal
         if clear[p] < least:
@@ -128,6 +129,7 @@ def rigid_first_hit(
     z: np.ndarray, wx: np.ndarray, wy: np.ndarray, clear: np.ndarray, radius: float, least: float, bx: float,
     by: float, btheta: float, states: np.ndarray, lo: np.ndarray, hi: np.ndarray, margin: float, field: np.ndarray,
     lattice: np.ndarray, resolution: float, half_diagonal: float, grid_lo: np.ndarray, grid_hi: np.ndarray,
+    space_margin: float,
 ) -> tuple[int, int]:
     """First sample whose base pose ``states[i]`` = (x, y, theta) puts the robot into an obstacle.
 
@@ -154,7 +156,7 @@ def rigid_first_hit(
             x = c * rx - s * ry + states[i, 0]
             y = s * rx + c * ry + states[i, 1]
             if point_clearance(x, y, z[p], lo, hi, margin, field, lattice, resolution, half_diagonal,
-                               grid_lo, grid_hi) < 0.0:
+                               grid_lo, grid_hi, space_margin) < 0.0:
                 return i, tested
     return -1, tested
 

@@ -115,7 +115,7 @@ class PlanarChecker:
         if space_free is not None and inside:
             points = self._points
             near = points[np.all((points >= self._box[0]) & (points <= self._box[1]), axis=1)]
-            if not bool(np.all(space_free(near))):
+            if not bool(np.all(self.problem.points_free(near))):
                 return False
         if clearance >= self.margin + self.slack:
             return True

@@ -4,6 +4,7 @@ Sec. 3.2.2), and the dense re-checks of paths."""
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -17,7 +18,7 @@ if TYPE_CHECKING:
     from explore.motion.robot import Robot
 
 
-SpaceFree = Callable[[np.ndarray], np.ndarray]  # points (n, 3) -> bool (n,) free
+SpaceFree = Callable[..., np.ndarray]  # points (n, 3)[, clearance] -> bool (n,) free
 
 Probability = Callable[[np.ndarray], np.ndarray]  # points (n, 3) -> occupancy (n,)
 
@@ -33,7 +34,9 @@ class MotionProblem:
     the robot parts near it are sampled (derived automatically for ``pvs.is_free``).
     ``drive_margin``: how far a mobile base keeps from the known environment while it drives,
     away from the drive's ends (:class:`explore.motion.PlanarChecker`); None: the robot's
-    ``drive_clearance``.
+    ``drive_clearance``. ``space_margin``: the clearance each link point keeps from non-free voxels,
+    passed to a ``space_free`` that takes one (``pvs.is_free(points, clearance)``); None: the
+    robot's ``space_margin`` (its clearance plus the gaps between its points).
     """
 
     def __init__(
@@ -44,8 +47,10 @@ class MotionProblem:
         resolution: float = 0.01,
         space_bounds: tuple[Array, Array] | None = None,
         drive_margin: float | None = None,
+        space_margin: float | None = None,
     ) -> None:
         self.robot = robot
+        self.space_margin = float(robot.space_margin if space_margin is None else space_margin)
         self.drive_margin = float(robot.drive_clearance if drive_margin is None else drive_margin)
         self.space_free = space_free
         self.margin = float(robot.clearance if margin is None else margin)
@@ -54,6 +59,7 @@ class MotionProblem:
         self.space_bounds = space_bounds if space_bounds is not None else _free_outside_box(space_free)
         self.pins: dict[int, float] = {}
         self.motions: dict[tuple, np.ndarray] = {}  # joint motions found (see cache_key)
+        self._takes_clearance: bool | None = None
 
     @property
     def lower(self) -> Array:
@@ -87,7 +93,7 @@ class MotionProblem:
     def pinned(self, dofs: Sequence[int], q: Array) -> MotionProblem:
         """The same problem with the joints ``dofs`` held at their values in ``q`` (e.g. the base)."""
         out = MotionProblem(self.robot, self.space_free, self.margin, self.resolution, self.space_bounds,
-                            self.drive_margin)
+                            self.drive_margin, self.space_margin)
         out.pins = {**self.pins, **{int(i): float(q[i]) for i in dofs}}
         out.motions = self.motions
         return out
@@ -107,9 +113,18 @@ class MotionProblem:
                 points = robot.link_points(q)
             else:  # only parts near the box whose outside ``space_free`` calls free
                 points = robot.link_points(q, within=self.space_bounds)
-            if len(points) and not bool(np.all(self.space_free(points))):
+            if len(points) and not bool(np.all(self.points_free(points))):
                 return False
         return True
+
+    def points_free(self, points: Points3) -> np.ndarray:
+        """``space_free`` of robot points, with ``space_margin`` when the test takes a clearance."""
+        assert self.space_free is not None
+        if self._takes_clearance is None:
+            self._takes_clearance = "clearance" in inspect.signature(self.space_free).parameters
+        if self._takes_clearance:
+            return self.space_free(points, clearance=self.space_margin)
+        return self.space_free(points)
 
     def is_valid_motion(self, a: Array, b: Array, resolution: float | None = None) -> bool:
         """The motion from ``a`` to ``b`` as the robot executes it, checked every ``resolution`` (L2).

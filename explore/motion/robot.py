@@ -59,7 +59,8 @@ class Robot(Plugin, ABC):
     base_dofs : indices (x, y, theta) of a mobile base in ``q``; empty without one
     base_pose : world_T_base of a fixed base (None when the base moves or there is none)
     dt : seconds each velocity control is held during execution
-    clearance : distance (m) planning keeps from known obstacles and non-free voxels
+    clearance : distance (m) planning keeps from known obstacles and non-free voxels (the
+        PVS test of the link points keeps :attr:`space_margin`, which adds :attr:`sample_gap`)
     drive_clearance : extra margin (m) kept while a base drives
     camera_height : height (m) of a camera fixed on the base (views are planned at it), or None
     laser_height : height (m) of the planar localisation laser (0: none)
@@ -96,6 +97,18 @@ class Robot(Plugin, ABC):
     def attach(self, sim: Simulation) -> None:
         """Add the robot to the simulation (load bodies, read limits, set ``q`` to its start)."""
         self.sim = sim
+
+    @property
+    def sample_gap(self) -> float:
+        """Largest distance (m) from the robot's surface to the nearest of its :meth:`link_points`
+        (0: the points are the whole surface)."""
+        return 0.0
+
+    @property
+    def space_margin(self) -> float:
+        """Margin (m) each link point keeps from the PVS's non-free voxels, :attr:`clearance` +
+        :attr:`sample_gap`: the surface between the points then keeps the clearance too."""
+        return float(self.clearance) + float(self.sample_gap)
 
     # -- kinematics ----------------------------------------------------------------------------
     @abstractmethod

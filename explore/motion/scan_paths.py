@@ -97,6 +97,18 @@ def _point_segment_distance(x: Array, a: Array, b: Array) -> float:
 BLOCK_FREE, BLOCK_UNKNOWN, BLOCK_OCCUPIED = "free", "unknown", "occupied"
 
 
+def _near_occupied(points: Points3, probability: Probability, radius: float, occupied_above: float) -> bool:
+    """Whether any point has a place with occupancy above ``occupied_above`` within ``radius``
+    (probed on a lattice of radius / 4 in the ball)."""
+    if not len(points):
+        return False
+    steps = np.arange(-4, 5) * (radius / 4.0)
+    offsets = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+    offsets = offsets[np.linalg.norm(offsets, axis=1) <= radius + 1e-12]
+    probes = (np.asarray(points, dtype=float)[:, None, :] + offsets[None]).reshape(-1, 3)
+    return bool(np.any(np.asarray(probability(probes), dtype=float) > occupied_above))
+
+
 def classify_blocked(
     robot: Robot,
     configs: np.ndarray,
@@ -105,6 +117,7 @@ def classify_blocked(
     occupied_above: float = 0.75,
     extra_points: Points3 | None = None,
     space_free: SpaceFree | None = None,
+    space_margin: float = 0.0,
 ) -> str:
     """NBS rule for a blocked candidate (Kriegel et al. IROS 2012 Sec. B6).
 
@@ -114,19 +127,24 @@ def classify_blocked(
     space -> ``"occupied"`` (discard it); otherwise any point not confidently free
     (p >= ``free_below`` = 0.05) -> ``"unknown"`` (keep it on the stack for later);
     else ``"free"`` (it is not blocked by the PVS). With ``space_free`` (e.g. ``pvs.is_free``)
-    only the points it reports blocked are classified (points outside the PVS grid are free).
+    only the points it reports blocked are classified (points outside the PVS grid are free); a
+    point whose own voxel is free but that is within ``space_margin`` of a non-free voxel
+    (``space_free(points, clearance=space_margin)``) counts as occupied if an occupied voxel is
+    that near, else as unknown.
     """
     points = [robot.link_points(q) for q in np.atleast_2d(configs)]
     if extra_points is not None:
         points.append(np.asarray(extra_points, dtype=float).reshape(-1, 3))
     stacked = np.vstack(points) if points else np.zeros((0, 3))
+    near = np.zeros((0, 3))
     if space_free is not None and len(stacked):
-        stacked = stacked[~np.asarray(space_free(stacked), dtype=bool)]
-    if len(stacked) == 0:
-        return BLOCK_FREE
-    prob = np.asarray(probability(stacked), dtype=float)
-    if np.any(prob > occupied_above):
+        free = np.asarray(space_free(stacked), dtype=bool)
+        if space_margin > 0.0:
+            near = stacked[free & ~np.asarray(space_free(stacked, clearance=space_margin), dtype=bool)]
+        stacked = stacked[~free]
+    prob = np.asarray(probability(stacked), dtype=float) if len(stacked) else np.zeros(0)
+    if np.any(prob > occupied_above) or _near_occupied(near, probability, space_margin, occupied_above):
         return BLOCK_OCCUPIED
-    if np.any(prob >= free_below):
+    if len(near) or np.any(prob >= free_below):
         return BLOCK_UNKNOWN
     return BLOCK_FREE

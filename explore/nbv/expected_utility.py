@@ -55,17 +55,20 @@ class ObstacleField:
     (negative inside) minus ``box_margin``
     (the robot's planning clearance, so that a planner-validated state has clearance >= 0).
     The PVS contributes every voxel with p >= 0.05 (unknown is an obstacle): its distance
-    field minus half a voxel diagonal inside the grid, the distance to the grid box outside.
+    field minus half a voxel diagonal and ``space_margin`` inside the grid (the robot's
+    ``space_margin``: its clearance plus the gaps between the sampled points), the distance to
+    the grid box outside.
     A point with clearance < 0 is in collision. Bodies below ``ground`` (the floor) are left
     out: planar base noise never changes heights, so it cannot push the robot into them.
     """
 
     def __init__(self, boxes: list[tuple[Array, Array]], pvs: Any = None, box_margin: float = 0.0,
-                 ground: float = 1e-3) -> None:
+                 ground: float = 1e-3, space_margin: float = 0.0) -> None:
         kept = [(np.asarray(lo, float), np.asarray(hi, float)) for lo, hi in boxes if float(hi[2]) > ground]
         self.lo = np.array([b[0] for b in kept]).reshape(-1, 3)
         self.hi = np.array([b[1] for b in kept]).reshape(-1, 3)
         self.box_margin = float(box_margin)
+        self.space_margin = float(space_margin)
         self.pvs = pvs
         self._field: np.ndarray | None = None
         self._version = -1
@@ -73,10 +76,11 @@ class ObstacleField:
 
     @classmethod
     def from_sim(cls, sim: Any, pvs: Any = None, box_margin: float | None = None) -> ObstacleField:
-        """The known environment of ``sim`` (never its objects) plus the PVS."""
+        """The known environment of ``sim`` (never its objects) plus the PVS, with the robot's margins."""
         boxes = [tuple(b.mesh.bounds) for b in sim.bodies if not b.is_object]
-        margin = float(getattr(getattr(sim, "robot", None), "clearance", 0.0)) if box_margin is None else box_margin
-        return cls(boxes, pvs, margin)
+        robot = getattr(sim, "robot", None)
+        margin = float(getattr(robot, "clearance", 0.0)) if box_margin is None else box_margin
+        return cls(boxes, pvs, margin, space_margin=float(getattr(robot, "space_margin", 0.0)))
 
     def _pvs_field(self) -> np.ndarray:
         version = getattr(self.pvs, "version", 0)
@@ -118,8 +122,8 @@ class ObstacleField:
     def clearance(self, points: Points3) -> Array:
         """(n,) clearance of each point (< 0: collision): to the boxes minus the margin; in the PVS the
         distance between the point's voxel centre and the nearest obstacle voxel centre minus half a
-        voxel diagonal (< 0 exactly when the point's own voxel is an obstacle). A point can be up to
-        half a diagonal nearer than that: motion bounds must subtract it."""
+        voxel diagonal and ``space_margin``. A point can be up to half a diagonal nearer than that:
+        motion bounds must subtract it."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         out = box_distance(points, self.lo, self.hi) - self.box_margin
         if self.pvs is not None and len(points):
@@ -127,7 +131,7 @@ class ObstacleField:
             field_ = self._pvs_field()
             ijk, inside = pvs.index(points)
             dist = np.empty(len(points))
-            dist[inside] = field_[tuple(ijk[inside].T)] - 0.5 * math.sqrt(3.0) * pvs.resolution
+            dist[inside] = field_[tuple(ijk[inside].T)] - 0.5 * math.sqrt(3.0) * pvs.resolution - self.space_margin
             outside = ~inside
             if outside.any():  # any obstacle voxel lies inside the grid box
                 lo, hi = np.asarray(pvs.min_corner)[None], np.asarray(pvs.max_corner)[None]
@@ -288,7 +292,8 @@ class _RigidReference:
         local = np.ascontiguousarray(robot.link_points(ref))
         self.local, self.z = local, np.ascontiguousarray(local[:, 2])
         field, lattice, resolution, grid_lo, grid_hi = obstacles.kernel_field()
-        self.grid = (field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution, grid_lo, grid_hi)
+        self.grid = (field, lattice, resolution, 0.5 * math.sqrt(3.0) * resolution, grid_lo, grid_hi,
+                     obstacles.space_margin)
         self.boxes = (obstacles.lo, obstacles.hi, obstacles.box_margin)
         self.pose: tuple[float, float, float] | None = None
 

@@ -294,7 +294,8 @@ class ScanMotion:
                 return ScanPlan(candidate, UNREACHABLE, "base heading outside the joint limits")
             configs = shifted
         if not all(problem.is_valid(q) for q in configs):
-            verdict = (classify_blocked(robot, configs, self.pvs.probability, space_free=self.free_space.is_free)
+            verdict = (classify_blocked(robot, configs, self.pvs.probability, space_free=self.free_space.is_free,
+                                        space_margin=problem.space_margin)
                        if problem.space_free is not None else None)
             if verdict == BLOCK_OCCUPIED:
                 return ScanPlan(candidate, OCCUPIED, "the scan runs through occupied space", None, configs)
