@@ -367,9 +367,9 @@ def main(argv: list[str] | None = None) -> int:
 
     sensor_params = {"profile": args.profile} if args.profile else {}
     try:
-        sensor_params.update(parse_assignment(item) for item in args.sensor_param)
+        sensor_params.update(parse_assignment(item, "--sensor-param") for item in args.sensor_param)
     except BadInput as error:
-        parser.error(f"--sensor-param: {error.field}: {error.message}")
+        parser.error(str(error))
     if sensor_params:
         from explore.sim import load_world_spec
 

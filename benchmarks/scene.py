@@ -61,7 +61,7 @@ def _world(name: str, args: argparse.Namespace) -> Any:
     from explore.sim import load_world_spec
 
     spec = load_world_spec(name)
-    params = dict(item.split("=", 1) for item in args.sensor_param)
+    params = dict(args.sensor_params)
     if args.profile is not None:
         params["profile"] = args.profile
     if not params:
@@ -356,13 +356,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")
     args = parser.parse_args(argv)
-    from explore.core import BadInput
+    from explore.core import BadInput, parse_assignment
     from explore.motion import work_clock
     from explore.runtime import Registry
 
-    for item in args.sensor_param:
-        if "=" not in item:
-            parser.error(f"--sensor-param: KEY=VALUE expected, got {item!r}")
+    try:
+        args.sensor_params = [parse_assignment(item, "--sensor-param") for item in args.sensor_param]
+    except BadInput as error:
+        parser.error(str(error))
     registry = Registry.load()
     try:  # the sensor's parameters as every part's worlds will take them
         spec = _world("tabletop", args).sensor

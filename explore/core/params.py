@@ -169,17 +169,17 @@ def validate_params(
     return out
 
 
-def parse_assignment(text: str) -> tuple[str, Any]:
-    """Parse a CLI ``key=value`` override; the value is read as YAML (numbers, lists, ...)."""
+def parse_assignment(text: str, option: str = "--set") -> tuple[str, Any]:
+    """Parse a CLI ``key=value`` override of ``option``; the value is read as YAML (numbers, lists, ...)."""
     from explore.core.user_files import parse_yaml
 
     if "=" not in text:
-        raise BadInput("--set", brief(text), "expected key=value")
+        raise BadInput(option, brief(text), "expected key=value")
     key, raw = text.split("=", 1)
     if not key.strip():
-        raise BadInput("--set", brief(text), "empty key")
+        raise BadInput(option, brief(text), "empty key")
     try:
-        value = parse_yaml(raw, f"--set {key.strip()}")
+        value = parse_yaml(raw, f"{option} {key.strip()}")
     except BadInput as error:
         if not error.message.startswith("malformed YAML"):
             raise

@@ -100,13 +100,13 @@ class Robot(Plugin, ABC):
 
     @property
     def sample_gap(self) -> float:
-        """Largest distance (m) from the robot's surface to the nearest of its :meth:`link_points`
-        (0: the points are the whole surface)."""
+        """Largest distance (m) from any point of the robot surface to the nearest of its
+        :meth:`link_points` (0: the points are the whole surface)."""
         return 0.0
 
     @property
     def space_margin(self) -> float:
-        """Margin (m) each link point keeps from the PVS's non-free voxels, :attr:`clearance` +
+        """Margin (m) each link point keeps from non-free voxels of the PVS, :attr:`clearance` +
         :attr:`sample_gap`: the surface between the points then keeps the clearance too."""
         return float(self.clearance) + float(self.sample_gap)
 
