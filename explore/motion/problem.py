@@ -59,7 +59,7 @@ class MotionProblem:
         self.space_bounds = space_bounds if space_bounds is not None else _free_outside_box(space_free)
         self.pins: dict[int, float] = {}
         self.motions: dict[tuple, np.ndarray] = {}  # joint motions found (see cache_key)
-        self._takes_clearance: bool | None = None
+        self._takes_clearance = space_free is not None and "clearance" in inspect.signature(space_free).parameters
 
     @property
     def lower(self) -> Array:
@@ -120,8 +120,6 @@ class MotionProblem:
     def points_free(self, points: Points3) -> np.ndarray:
         """``space_free`` of robot points, with ``space_margin`` when the test takes a clearance."""
         assert self.space_free is not None
-        if self._takes_clearance is None:
-            self._takes_clearance = "clearance" in inspect.signature(self.space_free).parameters
         if self._takes_clearance:
             return self.space_free(points, clearance=self.space_margin)
         return self.space_free(points)
