@@ -78,13 +78,10 @@ def _processing(args: argparse.Namespace) -> dict[str, Any]:
     return {k: v for k, v in pairs if v is not None}
 
 
-def _filtered(scan: Any, args: argparse.Namespace) -> Any:
-    from explore.perception import filter_depth_scan
+def _depth_processing(args: argparse.Namespace) -> Any:
     from explore.scene import SceneSettings
 
-    settings = SceneSettings(**_processing(args))
-    return filter_depth_scan(scan, settings.flying_pixel_filter or math.inf, settings.median_px,
-                             settings.organised_normals)
+    return SceneSettings(**_processing(args)).depth_processing
 
 
 def _round(row: dict[str, Any]) -> dict[str, Any]:
@@ -147,15 +144,19 @@ def part_recognition(args: argparse.Namespace, registry: Any) -> list[dict[str, 
     records: dict[tuple[str, str], list[tuple[str, str | None, str]]] = {}
     wrong: dict[tuple[str, str], dict[str, int]] = {}
     models_full: list[Model] = []
+    processing = _depth_processing(args)
     for world in ("tabletop", "tabletop_rearranged"):
         with Simulation(_world(world, args), registry) as sim:
+            if args.sensed_training:  # as the scene session does: training views through the world's sensor
+                for recognizer in methods.values():
+                    recognizer.sense_with(sim.sensor, processing)
             if not models_full:  # model frames of the first arrangement, as a database holds them
                 models_full = [Model(b.name, object_frame(b)[1]) for b in sim.objects()]
             bodies = {b.name: b for b in sim.objects()}
             for seed in range(args.seeds):
                 rng = np.random.default_rng(1000 + seed)
                 for eye, target in _views(rng, args.views):
-                    scan = _filtered(sim.sensor.acquire(sim, look_at(eye, target), rng), args)
+                    scan = processing.apply(sim.sensor.acquire(sim, look_at(eye, target), rng))
                     pvs = PVS.for_region(sim.spec.region_min, sim.spec.region_max, 0.005)
                     pvs.integrate(scan)
                     for cluster in segmenter.segment(scan).clusters:
@@ -352,6 +353,8 @@ def main(argv: list[str] | None = None) -> int:
                         "share of their depth (0: off; default: the session's)")
     parser.add_argument("--organised-normals", action=argparse.BooleanOptionalAction, default=None,
                         help="normals from the depth images (default: the session's)")
+    parser.add_argument("--sensed-training", action=argparse.BooleanOptionalAction, default=True,
+                        help="render the recognisers' training views through the world's sensor (VFH)")
     parser.add_argument("--median", type=int, choices=(0, 3, 5), help="median filter of the depth images (px)")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON only")
     parser.add_argument("--verbose", action="store_true", help="show the sessions' progress")

@@ -15,6 +15,7 @@ from explore.perception.contracts import (
 )
 from explore.perception.database import ObjectDatabase, default_path, object_frame
 from explore.perception.depth_filters import (
+    DepthProcessing,
     depth_image,
     filter_depth_scan,
     flying_pixel_mask,
@@ -89,6 +90,7 @@ __all__ = [
     "estimate_normals",
     "euclidean_clusters",
     "depth_image",
+    "DepthProcessing",
     "filter_depth_scan",
     "flying_pixel_mask",
     "fuse_poses",

@@ -11,13 +11,14 @@ from explore.core.plugin import Plugin
 
 if TYPE_CHECKING:
     from explore.perception.database import Model
+    from explore.perception.depth_filters import DepthProcessing
     from explore.perception.hypotheses import Hypothesis
     from explore.perception.icp import IcpResult
     from explore.perception.incremental_graph import IncrementalPoseGraph
     from explore.perception.pose_graph import PoseGraphResult
     from explore.perception.segmentation import Cloud, Cluster, Segmentation, Table
     from explore.perception.validation import Validation
-    from explore.sim import Scan
+    from explore.sim import RaySensor, Scan
 
 
 class Segmenter(Plugin, ABC):
@@ -56,6 +57,11 @@ class Recognizer(Plugin, ABC):
     @abstractmethod
     def accept(self, hypotheses: Sequence[Hypothesis]) -> list[Hypothesis]:
         """The hypotheses good enough to be validated against the PVS."""
+
+    def sense_with(self, sensor: RaySensor, processing: DepthProcessing) -> None:
+        """The sensor the clusters come from and the processing of its views, given before the first
+        :meth:`recognize`, so that a recogniser that renders training views of its models renders
+        them as that sensor sees them. Default: nothing."""
 
 
 class PoseValidator(Plugin, ABC):

@@ -96,6 +96,22 @@ def filter_depth_scan(scan: Scan, max_ratio: float = 0.02, median: int = 0, norm
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class DepthProcessing:
+    """What happens to every organised view before it is used: the flying-pixel filter's
+    ``max_ratio`` (0: off), a median over ``median_px`` pixels (0: off) and the image's normals."""
+
+    flying_pixel_filter: float = 0.02
+    median_px: int = 0
+    organised_normals: bool = True
+
+    def apply(self, scan: Scan) -> Scan:
+        """:func:`filter_depth_scan` with these settings; a scan that is not organised stays as it is."""
+        if scan.image_shape is None:
+            return scan
+        return filter_depth_scan(scan, self.flying_pixel_filter or np.inf, self.median_px, self.organised_normals)
+
+
 def with_organised_normals(scan: Scan, window: int = 5) -> Scan:
     """The scan with per-beam normals (:attr:`Scan.normals <explore.sim.Scan>`) from its
     organised image (:func:`organised_normals`; NaN without a return or a usable window)."""

@@ -15,9 +15,10 @@ from explore.core import Array, Points3, Pose, invert, look_at
 from explore.perception.hypotheses import ScanSource, raycasting_scene
 from explore.perception.normals import estimate_normals
 from explore.perception.segmentation import Cluster
-from explore.sim import Scan, TriMesh
+from explore.sim import MeshWorld, RaySensor, Scan, TriMesh, target_for
 
 if TYPE_CHECKING:
+    from explore.perception.depth_filters import DepthProcessing
     from explore.perception.model_data import ModelCloud
 
 
@@ -100,6 +101,44 @@ def render_views(
         normals = estimate_normals(points, normal_radius, eye)
         keep = points[:, 2] >= lo[2] + min_height
         views.append(RenderedView(points[keep], normals[keep], pose))
+    return views
+
+
+def sensed_views(
+    mesh: TriMesh,
+    directions: Points3,
+    distance: float,
+    sensor: RaySensor,
+    processing: DepthProcessing,
+    normal_radius: float = 0.01,
+    min_height: float = 0.0,
+    rng: np.random.Generator | None = None,
+) -> list[RenderedView]:
+    """The model standing on a floor, seen by ``sensor`` from ``distance`` along each direction
+    (looking at the origin) with the sensor's artefacts and ``processing``, cut as the segmenter
+    cuts a cluster: the returns within 1 cm of the model's box and ``min_height`` above its lowest
+    vertex, normals from the depth image where it gave them, else from a neighbour search (as
+    the segmenter). These are training
+    views that look like the scene's clusters (:func:`render_views` gives the bare surface)."""
+    lo, hi = mesh.bounds
+    reach = 2.0 * distance
+    floor = TriMesh(np.array([[-reach, -reach, lo[2]], [reach, -reach, lo[2]], [reach, reach, lo[2]],
+                              [-reach, reach, lo[2]]]), np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32))
+    world = MeshWorld([mesh, floor])
+    rng = rng or np.random.default_rng(0)
+    views = []
+    for direction in directions:
+        eye = direction * distance
+        scan = processing.apply(world.acquire(sensor, target_for(sensor, eye, np.zeros(3)), rng))
+        points, origins = scan.points(), scan.origins[scan.hits]
+        keep = np.all((points >= lo - 0.01) & (points <= hi + 0.01), axis=1) & (points[:, 2] >= lo[2] + min_height)
+        points, origins = points[keep], origins[keep]
+        normals = estimate_normals(points, normal_radius, origins) if len(points) else np.zeros((0, 3))
+        if scan.normals is not None:
+            given = scan.normals[scan.hits][keep]
+            finite = np.isfinite(given[:, 0])
+            normals[finite] = given[finite]
+        views.append(RenderedView(points, normals, look_at(eye, np.zeros(3))))
     return views
 
 

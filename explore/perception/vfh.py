@@ -3,11 +3,12 @@ search, "mean distance" over the closest 66 % of the cluster's views, threshold 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,9 +22,13 @@ from explore.perception.verification import (
     icp_refine,
     render_and_compare,
     render_views,
+    sensed_views,
     view_directions,
 )
-from explore.sim import Scan
+from explore.sim import RaySensor, Scan
+
+if TYPE_CHECKING:
+    from explore.perception.depth_filters import DepthProcessing
 
 # -- VFH "mean distance" (Görner Ch. 5) -------------------------------------------------------
 VFH_BINS = (45, 45, 45, 45, 128)
@@ -146,11 +151,26 @@ class VFHRecognizer(RecognizerBase):
         self.icp = refine
         self.match_threshold = match_threshold
         self.max_hypotheses = max_hypotheses
+        self.sensor: RaySensor | None = None
+        self.processing: DepthProcessing | None = None
+
+    def sense_with(self, sensor: RaySensor, processing: DepthProcessing) -> None:
+        """Render the training views through ``sensor`` and ``processing`` (:func:`sensed_views`):
+        the grazing dropouts, shadows, flying pixels and correlated noise the clusters have, and
+        their normals, instead of white noise and neighbour-search normals on the bare surface."""
+        before = self.descriptor_params()
+        self.sensor, self.processing = sensor, processing
+        if self.descriptor_params() != before:
+            self._cache.clear()
 
     def descriptor_params(self) -> dict[str, Any]:
-        return {"training_views": self.training_views, "view_distance": self.view_distance,
-                "pixel_angle_deg": self.pixel_angle_deg, "noise": self.noise, "min_height": self.min_height,
-                "normal_radius": self.normal_radius}
+        params: dict[str, Any] = {"training_views": self.training_views, "view_distance": self.view_distance,
+                                  "min_height": self.min_height, "normal_radius": self.normal_radius}
+        if self.sensor is None:
+            return {**params, "pixel_angle_deg": self.pixel_angle_deg, "noise": self.noise}
+        sensor = {p.name: getattr(self.sensor, p.name) for p in self.sensor.params if hasattr(self.sensor, p.name)}
+        return {**params, "sensor": {"name": self.sensor.name, **sensor},
+                "processing": dataclasses.asdict(self.processing) if self.processing is not None else None}
 
     def describe(self, model: Model) -> tuple[np.ndarray, dict[str, Any]]:
         """The database descriptor (k, 308 + 16 + 3): signature, model_T_camera, view centroid."""
@@ -170,9 +190,14 @@ class VFHRecognizer(RecognizerBase):
             arr = stored[0]
             data = VFHModel(arr[:, :nb], arr[:, nb : nb + 16].reshape(-1, 4, 4), arr[:, nb + 16 :])
         else:
-            views = render_views(model.mesh, view_directions(self.training_views), self.view_distance,
-                                 normal_radius=self.normal_radius, min_height=self.min_height,
-                                 pixel_angle_deg=self.pixel_angle_deg, noise=self.noise)
+            directions = view_directions(self.training_views)
+            if self.sensor is not None and self.processing is not None:
+                views = sensed_views(model.mesh, directions, self.view_distance, self.sensor, self.processing,
+                                     normal_radius=self.normal_radius, min_height=self.min_height)
+            else:
+                views = render_views(model.mesh, directions, self.view_distance, normal_radius=self.normal_radius,
+                                     min_height=self.min_height, pixel_angle_deg=self.pixel_angle_deg,
+                                     noise=self.noise)
             views = [v for v in views if len(v.points) >= 10]
             data = VFHModel(
                 np.array([vfh_signature(v.points, v.normals, v.model_T_camera[:3, 3]) for v in views]),

@@ -82,6 +82,7 @@ class SceneSession:
         self.settings = settings = dataclasses.replace(settings or SceneSettings(), **overrides)
         self.segmenter = _plugin(registry, "segmenter", settings.segmenter)
         self.recognizer = _plugin(registry, "recognizer", settings.recognizer)
+        self.recognizer.sense_with(sim.sensor, settings.depth_processing)
         self.validator = _plugin(registry, "pose_validator", settings.validator)
         self.registrar = require_role(_plugin(registry, "registrar", settings.registrar, "scans"), "scans", "<scene>")
         self.progress = progress

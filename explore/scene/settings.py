@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from explore.perception import DepthProcessing
+
 
 @dataclass(frozen=True)
 class SceneSettings:
@@ -74,3 +76,9 @@ class SceneSettings:
     flying_pixel_filter: float = 0.02
     median_px: int = 0
     organised_normals: bool = True
+
+    @property
+    def depth_processing(self) -> DepthProcessing:
+        """What every view goes through before it is used (``flying_pixel_filter``, ``median_px``,
+        ``organised_normals``)."""
+        return DepthProcessing(self.flying_pixel_filter, self.median_px, self.organised_normals)

@@ -17,7 +17,6 @@ from explore.core import Pose, invert, transform_points
 from explore.perception import (
     Cluster,
     PoseGraphResult,
-    filter_depth_scan,
     rebase_scan,
 )
 from explore.scene.motion import Target, target_start
@@ -71,10 +70,7 @@ class ViewTaking:
             return None
         start = time.perf_counter()
         scan = scene.sim.sensor.acquire(scene.sim, move.target, scene.rng_sensor)
-        settings = scene.settings
-        if scan.image_shape is not None:
-            scan = filter_depth_scan(scan, settings.flying_pixel_filter or np.inf, settings.median_px,
-                                     settings.organised_normals)
+        scan = scene.settings.depth_processing.apply(scan)
         true_pose = target_start(move.target)
         if not np.allclose(move.believed, true_pose, atol=1e-9):
             scan = rebase_scan(scan, move.believed)

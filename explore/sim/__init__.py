@@ -3,7 +3,7 @@ the simulated range sensors.
 """
 
 # The names other packages use (they import from the package, never from its modules).
-from explore.sim.acquire import target_for
+from explore.sim.acquire import MeshWorld, target_for
 from explore.sim.artefacts import (
     correlated_field,
     dark_return_probability,
@@ -23,6 +23,7 @@ from explore.sim.world import WorldSpec, find_world, list_worlds, load_world_spe
 
 __all__ = [
     "GroundTruthBody",
+    "MeshWorld",
     "NOISE_MODELS",
     "RayCaster",
     "RaySensor",

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from explore.core import Array, Pose, look_at
-from explore.sim.scan import ScanPath
+from explore.sim.meshes import TriMesh
+from explore.sim.scan import Scan, ScanPath
 from explore.sim.sensing import RaySensor
+from explore.sim.simulation import RayCaster
 
 
 def target_for(sensor: RaySensor, eye: Array, target: Array, sweep: float = 0.3) -> Pose | ScanPath:
@@ -35,3 +39,22 @@ def path_length(poses: list[Pose] | np.ndarray) -> float:
     if len(positions) < 2:
         return 0.0
     return float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
+
+
+class MeshWorld:
+    """A world of bare meshes for a sensor to look at: what :meth:`RaySensor.acquire` asks of a
+    simulation, without pybullet."""
+
+    client = None  # no renderer: nothing that needs the surfaces' colour is simulated
+
+    def __init__(self, meshes: list[TriMesh]) -> None:
+        self.raycaster = RayCaster(meshes)
+
+    def acquire(self, sensor: RaySensor, target: Pose | ScanPath, rng: np.random.Generator) -> Scan:
+        """What ``sensor`` measures here from ``target``, with every artefact it simulates except
+        those that need colour (dark-surface dropouts, RGB): e.g. the training views of a database
+        model, which has no colour, as the scene's sensor sees them."""
+        alone = copy.copy(sensor)
+        alone.dark_level = 0.0
+        alone.color = False
+        return alone.acquire(self, target, rng)  # type: ignore[arg-type]
