@@ -62,6 +62,8 @@ class VFHMeanDistance(VFHRecognizer):
         Param("pixel_angle_deg", float, 58.0 / 320.0, "deg", "angular pixel pitch of the training camera",
               low=1e-3),
         Param("noise", float, 1.425e-3 * 1.1**2, "m", "range noise added to training views", low=0.0),
+        Param("training_draws", int, 4, "", "noise draws averaged per training view through the scene's sensor",
+              low=1, high=64),
         Param("min_height", float, 0.01, "m", "cut of the model bottom (as the segmenter)", low=0.0),
         Param("normal_radius", float, 0.01, "m", "normal estimation radius (Görner 0.01 m)", low=1e-4),
         Param("refine", bool, True, "", "ICP-refine the pose from the best training view"),
