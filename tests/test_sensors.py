@@ -470,3 +470,27 @@ def test_organised_normals_travel_with_the_scan_into_the_clusters(step_sim, regi
     mine = np.isfinite(organised[:, 0])
     assert len(box.points) > 500 and mine.mean() > 0.5
     np.testing.assert_array_equal(box.normals[mine], organised[mine])
+
+
+def test_a_world_of_bare_meshes_is_seen_as_the_simulation_sees_it(wall_sim, registry, rng) -> None:
+    """MeshWorld: the same camera on the same wall, without pybullet, gives the same exact depths;
+    a Kinect-profiled camera with dark-surface dropouts gets every frontal return there (the
+    meshes have no colour) and its depths stay on the disparity levels."""
+    from explore.sim import MeshWorld, TriMesh, box_mesh
+    from explore.sim.artefacts import depth_level_spacing
+
+    pose = look_at([0.1, -0.2, 1.25], [0.1, -0.2, 0.0])
+    exact = _camera(registry, noise="none", max_range=3.0)
+    wall = box_mesh(np.array([4.0, 4.0, 0.02]))
+    bare = MeshWorld([TriMesh(wall.vertices - [0.0, 0.0, 0.01], wall.triangles)])  # the wall of WALL
+    np.testing.assert_allclose(bare.acquire(exact, pose, rng).ranges, exact.acquire(wall_sim, pose, rng).ranges,
+                               atol=1e-6)
+    kinect = _camera(registry, profile="kinect", dark_level=200.0, max_range=3.0)
+    scan = bare.acquire(kinect, pose, rng)
+    assert kinect.dark_level == 200.0  # the plugin itself is left as it was
+    assert scan.hits.mean() > 0.99
+    z = _depth(scan, pose)
+    steps = kinect.disparity_focal * kinect.baseline / z / kinect.disparity_step
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
+    assert np.abs(z - 1.25).max() < 4 * float(kinect.sigma(np.array(1.25))) + depth_level_spacing(
+        1.25, kinect.disparity_focal, kinect.baseline, kinect.disparity_step)
