@@ -31,6 +31,7 @@ from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
 from explore.perception.incremental_graph import IncrementalPoseGraph, LikelihoodField
 from explore.perception.model_data import ModelCloud, model_cloud
 from explore.perception.normals import estimate_normals
+from explore.perception.planar_icp import refine_planar
 from explore.perception.plane_icp import as_2d_transform, plane_frame, plane_icp
 from explore.perception.pose_graph import PoseGraph, PoseGraphResult, pose_graph_from_scans, rebase_scan, sigmas6
 from explore.perception.ppf import PPFRecognizer
@@ -104,6 +105,7 @@ __all__ = [
     "object_frame",
     "plane_frame",
     "plane_icp",
+    "refine_planar",
     "pose_graph_from_scans",
     "pvs_votes",
     "ransac_iterations",

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, Points3, Pose, invert, transform_points
+from explore.core import Array, Points3, Pose, invert, pose_error, transform_points
 from explore.motion import Capability
 from explore.sim import ScanPath
 
@@ -119,11 +119,13 @@ class Mover:
     min_path_fraction : shortest reachable share of a scan path that is still scanned
     localise : a base with a planar laser localises its belief in the known environment after
         every leg (:meth:`localise`); False: odometry only
+    refine_localisation : refine each correlative laser match by point-to-plane ICP on the known
+        surfaces (:func:`~explore.perception.refine_planar`)
     """
 
     def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
                  occupied_from: float = 0.75, seed: int = 0, planning_time: float = 10.0,
-                 min_path_fraction: float = 0.4, localise: bool = True) -> None:
+                 min_path_fraction: float = 0.4, localise: bool = True, refine_localisation: bool = True) -> None:
         self.sim = sim
         self.robot = sim.robot
         self.noise = bool(noise)
@@ -148,8 +150,10 @@ class Mover:
         self._drift_var = np.zeros(2)  # the same since the belief was last localised
         self._laser_rng = np.random.default_rng([seed, 1])
         self._field: Any = None  # likelihood field of the known environment, built on first use
+        self._surface: tuple[Points3, Points3] | None = None  # its surface samples and normals
         self.localisations = 0
         self.localising = bool(localise)
+        self.refine_localisation = bool(refine_localisation)
 
     # -- queries ---------------------------------------------------------------------------
     @property
@@ -328,9 +332,10 @@ class Mover:
             return False
         if self._field is None:
             from explore.perception import LikelihoodField
-            from explore.scene.scene_objects import environment_reference
+            from explore.scene.scene_objects import environment_surface
 
-            self._field = LikelihoodField(environment_reference(self.sim))
+            self._surface = environment_surface(self.sim)
+            self._field = LikelihoodField(self._surface[0])
         believed = _planar(*self.believed_q[[ix, iy, ith]])
         trans, rot = np.sqrt(self._drift_var)
         search = (float(np.clip(3.0 * trans, 0.05, 0.5)), float(np.clip(3.0 * rot, math.radians(1.0),
@@ -338,7 +343,16 @@ class Mover:
         correction, score = self._field.match(transform_points(believed, local), believed[:2, 3], *search)
         if score < min_score:
             return False
-        self.believed_q[[ix, iy, ith]] = _planar_params(correction @ believed)
+        matched = correction @ believed
+        if self.refine_localisation:  # the correlative match is a 1 cm grid answer: refine it on the surfaces
+            from explore.perception import refine_planar
+
+            refined = refine_planar(transform_points(matched, local), *self._surface, matched[:2, 3])
+            if refined is not None:
+                moved, turned = pose_error(refined[0] @ matched, matched)
+                if moved <= 0.03 and turned <= math.radians(1.0):  # within the correlative match's cell
+                    matched = refined[0] @ matched
+        self.believed_q[[ix, iy, ith]] = _planar_params(matched)
         self._drift_var = np.zeros(2)
         self.localisations += 1
         return True

@@ -128,18 +128,27 @@ def close_holes(mesh: TriMesh) -> TriMesh:
 def environment_reference(sim: Any, spacing: float = 0.02, min_height: float = 0.05) -> Points3:
     """Points on the upright surfaces of the known environment (walls, table edges and legs):
     the map a mobile base localises in (a planner may know the environment; objects are left out)."""
+    return environment_surface(sim, spacing, min_height)[0]
+
+
+def environment_surface(sim: Any, spacing: float = 0.02, min_height: float = 0.05) -> tuple[Points3, Points3]:
+    """:func:`environment_reference`'s points and their outward normals, one sample per ``spacing`` cell."""
     from explore.mapping import sample_surface
 
-    parts = []
+    points, normals = [], []
     for body in sim.bodies:
         if body.is_object:
             continue
-        points, normals = sample_surface(body.mesh, spacing * spacing, seed=0)
-        upright = (np.abs(normals[:, 2]) < math.cos(math.radians(45.0))) & (points[:, 2] > min_height)
-        parts.append(points[upright])
-    out = np.vstack(parts) if parts else np.zeros((0, 3))
+        p, n = sample_surface(body.mesh, spacing * spacing, seed=0)
+        upright = (np.abs(n[:, 2]) < math.cos(math.radians(45.0))) & (p[:, 2] > min_height)
+        points.append(p[upright])
+        normals.append(n[upright])
+    if not points:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    out, out_normals = np.vstack(points), np.vstack(normals)
     keys = np.floor(out / spacing).astype(np.int64)
-    return out[np.sort(np.unique(keys, axis=0, return_index=True)[1])] if len(out) else out
+    first = np.sort(np.unique(keys, axis=0, return_index=True)[1])
+    return out[first], out_normals[first]
 
 
 def _plugin(registry: Any, kind: str, spec: Any, role: str = "") -> Any:
