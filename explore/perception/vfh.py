@@ -159,7 +159,10 @@ class VFHRecognizer(RecognizerBase):
     def sense_with(self, sensor: RaySensor, processing: DepthProcessing) -> None:
         """Render the training views through ``sensor`` and ``processing`` (:func:`sensed_views`):
         the grazing dropouts, shadows, flying pixels and correlated noise the clusters have, and
-        their normals, instead of white noise and neighbour-search normals on the bare surface."""
+        their normals, instead of white noise and neighbour-search normals on the bare surface.
+        A VFH signature describes one camera image: a line sensor keeps the bare-surface views."""
+        if sensor.geometry != "area":
+            return
         before = self.descriptor_params()
         self.sensor, self.processing = sensor, processing
         if self.descriptor_params() != before:
@@ -202,12 +205,8 @@ class VFHRecognizer(RecognizerBase):
         from another draw as from a neighbouring view (distances of 13-25 between two draws against
         γ = 15), so a single draw would be matched against the noise, not the shape."""
         directions = view_directions(self.training_views)
-        if self.sensor is None or self.processing is None:
-            views = render_views(model.mesh, directions, self.view_distance, normal_radius=self.normal_radius,
-                                 min_height=self.min_height, pixel_angle_deg=self.pixel_angle_deg, noise=self.noise)
-            views = [v for v in views if len(v.points) >= 10]
-            signatures = np.array([vfh_signature(v.points, v.normals, v.model_T_camera[:3, 3]) for v in views])
-        else:
+        views = []
+        if self.sensor is not None and self.processing is not None:
             rng = np.random.default_rng(0)
             draws = [sensed_views(model.mesh, directions, self.view_distance, self.sensor, self.processing,
                                   normal_radius=self.normal_radius, min_height=self.min_height, rng=rng)
@@ -216,6 +215,11 @@ class VFHRecognizer(RecognizerBase):
             views = [draws[0][i] for i in keep]
             signatures = np.array([np.mean([vfh_signature(d[i].points, d[i].normals, d[i].model_T_camera[:3, 3])
                                             for d in draws], axis=0) for i in keep])
+        if not views:  # no sensor, or it saw nothing of the model from view_distance
+            views = render_views(model.mesh, directions, self.view_distance, normal_radius=self.normal_radius,
+                                 min_height=self.min_height, pixel_angle_deg=self.pixel_angle_deg, noise=self.noise)
+            views = [v for v in views if len(v.points) >= 10]
+            signatures = np.array([vfh_signature(v.points, v.normals, v.model_T_camera[:3, 3]) for v in views])
         return VFHModel(signatures, np.array([v.model_T_camera for v in views]),
                         np.array([v.points.mean(axis=0) for v in views]))
 
