@@ -57,7 +57,7 @@ def refine_planar(
                 return None
             n, q, p = flat[index[ok]], surface[index[ok], :2], moved[ok, :2]
             r = np.einsum("ij,ij->i", n, p - q)
-            arm = p - centre
+            arm = p - centre - shift  # R(yaw)(p_i - c): what a turn about the pivot moves
             jac = np.column_stack([n, n[:, 1] * arm[:, 0] - n[:, 0] * arm[:, 1]])
             w = np.minimum(1.0, huber / np.maximum(np.abs(r), 1e-12))
             h = jac.T @ (jac * w[:, None]) + 1e-6 * len(r) * np.diag([1.0, 1.0, 0.01])
