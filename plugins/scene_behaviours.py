@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import BUDGET, SUCCESS, Param
+from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Param
 from explore.perception import Q_H_MIN
 from explore.runtime import ExploreBehaviour, Outcome, failure, success
 
@@ -30,21 +30,26 @@ class SceneRun:
 
     @property
     def end_outcome(self) -> str:
-        """BUDGET when the view budget ran out before a patrolled table got a view, else SUCCESS: the objects
-        of a table never looked at are not explained, however well the others went."""
-        return BUDGET if self._unseen_tables() else SUCCESS
+        """SUCCESS unless a patrolled table got no view: NO_CANDIDATES when none of its observation
+        poses could be reached, BUDGET when the view budget ran out first. The objects of a table
+        never looked at are not explained, however well the others went."""
+        unreached, unseen = self._unseen_tables()
+        return NO_CANDIDATES if unreached else BUDGET if unseen else SUCCESS
 
     @property
     def end_reason(self) -> str:
-        unseen = self._unseen_tables()
-        if not unseen:
-            return ""
-        return f"view budget of {self.session.settings.max_views} used up before {', '.join(unseen)} got a view"
+        unreached, unseen = self._unseen_tables()
+        if unreached:
+            return f"no observation pose around {', '.join(unreached)} could be reached"
+        if unseen:
+            return f"view budget of {self.session.settings.max_views} used up before {', '.join(unseen)} got a view"
+        return ""
 
-    def _unseen_tables(self) -> list[str]:
-        if self.session.budget_left > 0:
-            return []
-        return [entry["table"] for entry in self.patrol.get("tables", []) if not entry["views"]]
+    def _unseen_tables(self) -> tuple[list[str], list[str]]:
+        """(tables whose poses were all unreachable, tables the view budget left unseen)."""
+        tables = self.patrol.get("tables", [])
+        return ([t["table"] for t in tables if not t["views"] and t.get("unreachable")],
+                [t["table"] for t in tables if not t["views"] and not t.get("unreachable")])
 
     def live_stats(self) -> dict[str, Any]:
         s = self.session
@@ -229,6 +234,8 @@ class SegmentScene(ExploreBehaviour):
 
     def work(self) -> Outcome:
         scene = _scene(self)
+        if not scene.views:  # e.g. a patrolled table none of whose poses was reachable
+            return success("no view to segment")
         objects = scene.segment()
         self.context.status_line = _status(self)
         if scene.table is None:
@@ -437,8 +444,11 @@ class SurroundTable(ExploreBehaviour):
         focus = tables[table] if isinstance(table, str) and table in tables else list(tables.values())[0]
         name = next(k for k, v in tables.items() if v is focus)
         views = surround(scene, focus, self.p["d_min"], self.p["d_max"], math.radians(self.p["step_deg"]))
-        run.patrol.setdefault("tables", []).append({"table": name, "views": len(views)})
-        return success(f"{name}: {len(views)} views")
+        entry: dict[str, Any] = {"table": name, "views": len(views)}
+        if not views and scene.budget_left > 0:
+            entry["unreachable"] = True
+        run.patrol.setdefault("tables", []).append(entry)
+        return success(f"{name}: {len(views)} views" + (" (no observation pose reachable)" if not views else ""))
 
 
 class ListTables(ExploreBehaviour):

@@ -430,3 +430,33 @@ def test_a_patrol_out_of_views_before_a_table_is_seen_says_so(registry, tmp_path
     assert result.metrics["objects_explained"] < result.metrics["objects_total"]
     pvs = SparsePVS.load(tmp_path / "run" / "pvs.npz")
     assert pvs.resolution == pytest.approx(0.005) and pvs.counts("octomap")["occupied"] > 10_000
+
+
+FENCED = """
+name: fenced
+description: scene_small_mobile with its table inside a solid ring 0.65-1.6 m from its centre, 0.2 m high
+environment:
+  - {name: floor, box: [6.0, 6.0, 0.02], position: [0.0, 0.0, -0.01]}
+  - {name: table, source: table/table.urdf, position: [0.0, 0.0, 0.3125]}
+  - {name: ring_s, box: [3.2, 0.95, 0.2], position: [0.0, -1.125, 0.1]}
+  - {name: ring_n, box: [3.2, 0.95, 0.2], position: [0.0, 1.125, 0.1]}
+  - {name: ring_w, box: [0.95, 1.3, 0.2], position: [-1.125, 0.0, 0.1]}
+  - {name: ring_e, box: [0.95, 1.3, 0.2], position: [1.125, 0.0, 0.1]}
+objects:
+  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.12], on_top_of: table}
+region: {min: [-0.35, -0.25, 0.625], max: [0.35, 0.25, 0.85]}
+robot: {plugin: mobile_base, base: [0.0, -2.3, 0.0, 90.0]}
+sensor: {plugin: depth_camera, params: {width: 160, height: 120, min_range: 0.3, max_range: 2.0}}
+"""
+
+
+def test_a_patrol_that_reaches_no_pose_around_a_table_says_so(registry, tmp_path):
+    """Every observation pose around the table lies inside a solid ring: the table gets no view, and
+    the run fails saying why (a patrol whose other tables were explained ends no_candidates)."""
+    from explore.runtime import RunConfig, execute
+
+    result = execute(RunConfig(tree="table_patrol", world=_world(tmp_path, FENCED), seed=0, out=tmp_path / "run",
+                               settings={"start_scene.db": str(tmp_path / "objects.db")}), registry)
+    assert result.metrics["patrol"]["tables"] == [{"table": "table", "views": 0, "unreachable": True}]
+    assert result.status == "failure" and "no observation pose around table could be reached" in result.reason, \
+        (result.status, result.reason)

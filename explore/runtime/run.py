@@ -120,16 +120,16 @@ def _tick(config: RunConfig, registry: Any, context: RunContext, tree_file: Any,
         if root.status in (Status.SUCCESS, Status.FAILURE):
             break
         context.wait_for_work(0.1)
+    providers = [p for p in context.state.values() if getattr(p, "end_outcome", "")]
+    short = next((p for p in providers if p.end_outcome != SUCCESS), None)
     if root.status == Status.SUCCESS:  # the tree succeeded: did the mission reach its goal?
-        providers = [p for p in context.state.values() if getattr(p, "end_outcome", "")]
-        short = next((p for p in providers if p.end_outcome != SUCCESS), None)
         if short is not None:
             status, reason = short.end_outcome, short.end_reason
         else:
             ends = [getattr(p, "end_reason", "") for p in context.state.values()]
             status, reason = SUCCESS, root.feedback_message or next((e for e in ends if e), "tree succeeded")
-    elif root.status == Status.FAILURE:
-        status, reason = FAILURE, _failure_reason(root)
+    elif root.status == Status.FAILURE:  # with what the run's state knows of why, if it does
+        status, reason = FAILURE, _failure_reason(root) + (f" ({short.end_reason})" if short is not None else "")
     else:
         status, reason = BUDGET, f"tree still running after max_ticks={config.max_ticks}"
     tree.shutdown()

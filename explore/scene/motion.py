@@ -401,7 +401,9 @@ class Mover:
 
     def _escape(self, problem: Any) -> Array | None:
         """The latest valid configuration of the last motion, else (a base) the nearest base
-        shift along the heading (2-20 cm) that is valid, with twice the clearance if it can."""
+        shift (2-20 cm) that is valid, with twice the clearance if it can: straight back or
+        forward along the heading first, then sideways and diagonally (a base driving along a
+        table's edge cannot leave its clearance along its heading)."""
         for candidate in [] if self._last_path is None else self._last_path[::-1]:
             if problem.is_valid(candidate):
                 return candidate
@@ -409,13 +411,14 @@ class Mover:
             return None
         q = np.asarray(self.robot.q, dtype=float)
         ix, iy, ith = self.base_dofs
-        axis = np.array([math.cos(q[ith]), math.sin(q[ith])])
         shifts = []
-        for step in (0.02, 0.05, 0.1, 0.2):
-            for sign in (-1.0, 1.0):
-                shifted = q.copy()
-                shifted[[ix, iy]] += sign * step * axis
-                shifts.append(shifted)
+        for turn in (0.0, 0.5 * math.pi, 0.25 * math.pi, 0.75 * math.pi):
+            axis = np.array([math.cos(q[ith] + turn), math.sin(q[ith] + turn)])
+            for step in (0.02, 0.05, 0.1, 0.2):
+                for sign in (-1.0, 1.0):
+                    shifted = q.copy()
+                    shifted[[ix, iy]] += sign * step * axis
+                    shifts.append(shifted)
         for margin in (2.0 * problem.margin, problem.margin):
             for candidate in shifts:
                 if problem.is_valid(candidate, margin=margin):
