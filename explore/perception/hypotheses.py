@@ -91,8 +91,10 @@ def accepted(
     return out
 
 
-def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 600) -> Array:
-    """Distances (m) from ``samples`` points of the model surface at ``pose_a`` to the surface at ``pose_b``.
+def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 600,
+                      onto: TriMesh | None = None) -> Array:
+    """Distances (m) from ``samples`` points of the model surface at ``pose_a`` to the surface at ``pose_b``
+    (or to ``onto`` at ``pose_b``: another object's surface).
 
     Their mean is the symmetric-object pose error (ADD-S): zero for two poses that put the
     surface in the same place, such as a plain cube turned by 90 degrees. Point-to-mesh
@@ -104,7 +106,7 @@ def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 
 
     points, _ = sample_surface(mesh, max(mesh.area(), 1e-12) / samples, seed=1)
     at_a = points @ pose_a[:3, :3].T + pose_a[:3, 3]
-    scene = raycasting_scene(mesh, pose_b)
+    scene = raycasting_scene(mesh if onto is None else onto, pose_b)
     return scene.compute_distance(o3d.core.Tensor(at_a.astype(np.float32))).numpy().astype(np.float64)
 
 
