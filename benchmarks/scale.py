@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import subprocess
@@ -82,6 +83,12 @@ def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: 
         worst_map_error=None if not errors else [round(max(e[0] for e in errors), 1),
                                                  round(max(e[1] for e in errors), 2)],
         wrong_accepted=metrics["wrong_matches"]["accepted"],
+        # of those, objects taken for the model of another object of the same shape: the wrong model
+        # lies within 5 mm of the object's surface (no geometric recogniser can tell them apart)
+        wrong_same_shape=sum(o.get("correct_model") is False and o.get("wrong_model_fit_mm", math.inf) <= 5.0
+                             for o in metrics["objects"]),
+        # known objects whose surface the model puts within 5 mm (a symmetric one may be turned)
+        known_surface_within_5mm=f"{sum(o.get('surface_error_mm', math.inf) <= 5.0 for o in known)}/{len(known)}",
         scene_s=round(metrics["scene_elapsed_s"], 1),
         **{k.removesuffix("_s"): round(metrics["timings_s"].get(k, 0.0), 1) for k in SPLIT},
     )
