@@ -259,7 +259,7 @@ def test_a_drive_in_legs_ends_nearer_its_goal(open_world, registry):
 def test_a_base_that_localises_as_it_drives_knows_where_it_is(open_world, registry):
     """The same 4-5 m drive with two seeds: on odometry alone the believed base pose ends
     decimetres and degrees from the true one; matching the base laser against the known room
-    after every leg (AMCL-like) keeps the belief within 3 cm and 1 degree."""
+    after every leg (AMCL-like, refined on the surfaces) keeps the belief within 1 cm and half a degree."""
     from explore.core import look_at
     from explore.motion import work_clock
     from explore.scene import Mover
@@ -274,7 +274,7 @@ def test_a_base_that_localises_as_it_drives_knows_where_it_is(open_world, regist
             believed, true = mover.believed_q[:3], sim.robot.q[:3]
             turn = abs((believed[2] - true[2] + math.pi) % (2 * math.pi) - math.pi)
             errors[localise].append((float(np.linalg.norm(believed[:2] - true[:2])), math.degrees(turn)))
-    assert all(d < 0.03 and a < 1.0 for d, a in errors[True]), errors
+    assert all(d < 0.01 and a < 0.5 for d, a in errors[True]), errors
     assert max(d for d, _ in errors[False]) > 3 * max(d for d, _ in errors[True]), errors
 
 
