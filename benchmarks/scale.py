@@ -83,8 +83,10 @@ def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: 
         worst_map_error=None if not errors else [round(max(e[0] for e in errors), 1),
                                                  round(max(e[1] for e in errors), 2)],
         wrong_accepted=metrics["wrong_matches"]["accepted"],
-        # of those, objects taken for the model of another object of the same shape: the wrong model
-        # lies within 5 mm of the object's surface (no geometric recogniser can tell them apart)
+        # objects recognised as another object's model, and of those the ones taken for a model of the
+        # same shape: the wrong model lies within 5 mm of the object's surface (no geometric recogniser
+        # can tell them apart)
+        wrong_models=sum(o.get("correct_model") is False for o in metrics["objects"]),
         wrong_same_shape=sum(o.get("correct_model") is False and o.get("wrong_model_fit_mm", math.inf) <= 5.0
                              for o in metrics["objects"]),
         # known objects whose surface the model puts within 5 mm (a symmetric one may be turned)
