@@ -89,7 +89,7 @@ from explore.nbv.strategy import OVERRIDES, Strategy, StrategyPlugin, make_strat
 from explore.nbv.termination import Termination
 from explore.nbv.utility import RAY_PARAMS, RayUtility, Utility, beams_of, candidate_beams, non_free_count
 from explore.nbv.view_generator import ViewGenerator
-from explore.perception import Cluster, Hypothesis, Model, Segmentation, Validation
+from explore.perception import Cluster, DepthProcessing, Hypothesis, Model, Segmentation, Validation
 from explore.perception.contracts import (
     PlaneRegistrar,
     PoseValidator,
@@ -103,7 +103,7 @@ from explore.runtime import KINDS, ExploreBehaviour, Outcome, failure, hookimpl,
 from explore.runtime.compare_grid import OnDone, RunSpec
 from explore.runtime.executor import Executor
 from explore.runtime.hookspecs import ENTRY_POINT_GROUP
-from explore.sim import NOISE_MODELS, RaySensor, Scan, ScanPath, Simulation, frame_pose
+from explore.sim import NOISE_MODELS, MeshWorld, RaySensor, Scan, ScanPath, Simulation, frame_pose
 
 #: the contract of the ``sensor`` kind (:class:`explore.sim.sensing.RaySensor`)
 Sensor = RaySensor
@@ -167,9 +167,11 @@ __all__ = [
     "CollisionEvent",
     "Cluster",
     "Decision",
+    "DepthProcessing",
     "Execution",
     "Executor",
     "Hypothesis",
+    "MeshWorld",
     "Model",
     "MotionPlan",
     "MotionPlanner",
