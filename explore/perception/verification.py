@@ -117,8 +117,7 @@ def sensed_views(
     """The model standing on a floor, seen by ``sensor`` from ``distance`` along each direction
     (looking at the origin) with the sensor's artefacts and ``processing``, cut as the segmenter
     cuts a cluster: the returns within 1 cm of the model's box and ``min_height`` above its lowest
-    vertex, normals from the depth image where it gave them, else from a neighbour search (as
-    the segmenter). These are training
+    vertex, with the depth image's normals where it gave them, else a neighbour search's. Training
     views that look like the scene's clusters (:func:`render_views` gives the bare surface)."""
     lo, hi = mesh.bounds
     reach = 2.0 * distance
