@@ -170,6 +170,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 row["coverage_estimate"] = obj.coverage_estimate
             # wrong matches among the last hypotheses and where they were stopped
             stopped = {(r["model"], round(float(r["q_h"]), 9)): r["by"] for r in obj.rejected}
+            accepted_before = wrong["accepted"]
             for h in obj.hypotheses:
                 _, h_body = truth_of(h.model)
                 if h_body == body.name:
@@ -182,6 +183,8 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                     wrong["rejected_pvs"] += 1
                 elif obj.status == "recognised" and obj.model == h.model:
                     wrong["accepted"] += 1
+            if row.get("correct_model") is False and wrong["accepted"] == accepted_before:
+                wrong["accepted"] += 1  # recognised by agreeing single views (no merged hypothesis passed)
         rows.append(row)
     known_bodies = {truth_of(name)[1] for name in session.known_at_start}
     known_present = sum(1 for b in sim.objects() if b.name in known_bodies)
