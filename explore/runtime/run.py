@@ -128,8 +128,10 @@ def _tick(config: RunConfig, registry: Any, context: RunContext, tree_file: Any,
         else:
             ends = [getattr(p, "end_reason", "") for p in context.state.values()]
             status, reason = SUCCESS, root.feedback_message or next((e for e in ends if e), "tree succeeded")
-    elif root.status == Status.FAILURE:  # with what the run's state knows of why, if it does
-        status, reason = FAILURE, _failure_reason(root) + (f" ({short.end_reason})" if short is not None else "")
+    elif root.status == Status.FAILURE:
+        status, reason = FAILURE, _failure_reason(root)
+        if short is not None and not _failed_steps(root):  # only a goal check failed: the run's state says why
+            status, reason = short.end_outcome, f"{short.end_reason} ({reason})"
     else:
         status, reason = BUDGET, f"tree still running after max_ticks={config.max_ticks}"
     tree.shutdown()
@@ -142,9 +144,16 @@ def _failure_reason(root: Any) -> str:
 
     reason = root.feedback_message or "tree failed"
     failed = [n for n in root.iterate() if n.status == Status.FAILURE and n.feedback_message and not n.children]
-    steps = [n for n in failed if not getattr(n, "is_condition", False)]  # a condition's failure is an answer
-    for node in steps or failed:
+    for node in _failed_steps(root) or failed:
         reason = f"{node.name}: {node.feedback_message}"
     return reason
+
+
+def _failed_steps(root: Any) -> list[Any]:
+    """The failed leaves that are steps, not conditions (a condition's failure is an answer)."""
+    from py_trees.common import Status
+
+    return [n for n in root.iterate() if n.status == Status.FAILURE and n.feedback_message and not n.children
+            and not getattr(n, "is_condition", False)]
 
 
