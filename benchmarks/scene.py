@@ -79,9 +79,9 @@ def _processing(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _depth_processing(args: argparse.Namespace) -> Any:
-    from explore.scene import SceneSettings
+    from explore.perception import DepthProcessing
 
-    return SceneSettings(**_processing(args)).depth_processing
+    return DepthProcessing(**_processing(args))
 
 
 def _round(row: dict[str, Any]) -> dict[str, Any]:

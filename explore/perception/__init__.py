@@ -31,7 +31,7 @@ from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
 from explore.perception.incremental_graph import IncrementalPoseGraph, LikelihoodField
 from explore.perception.model_data import ModelCloud, model_cloud
 from explore.perception.normals import estimate_normals
-from explore.perception.planar_icp import refine_planar
+from explore.perception.planar_icp import PlanarSurface, refine_planar
 from explore.perception.plane_icp import as_2d_transform, plane_frame, plane_icp
 from explore.perception.pose_graph import PoseGraph, PoseGraphResult, pose_graph_from_scans, rebase_scan, sigmas6
 from explore.perception.ppf import PPFRecognizer
@@ -52,6 +52,7 @@ from explore.perception.verification import icp_refine, inlier_fraction, render_
 from explore.perception.vfh import VFHRecognizer, vfh_signature
 
 __all__ = [
+    "PlanarSurface",
     "icp_refine",
     "inlier_fraction",
     "ModelCloud",

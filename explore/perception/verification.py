@@ -15,7 +15,7 @@ from explore.core import Array, Points3, Pose, invert, look_at
 from explore.perception.hypotheses import ScanSource, raycasting_scene
 from explore.perception.normals import estimate_normals
 from explore.perception.segmentation import Cluster
-from explore.sim import MeshWorld, RaySensor, Scan, TriMesh, target_for
+from explore.sim import MeshWorld, RaySensor, Scan, TriMesh, box_mesh, target_for
 
 if TYPE_CHECKING:
     from explore.perception.depth_filters import DepthProcessing
@@ -120,10 +120,8 @@ def sensed_views(
     vertex, with the depth image's normals where it gave them, else a neighbour search's. Training
     views that look like the scene's clusters (:func:`render_views` gives the bare surface)."""
     lo, hi = mesh.bounds
-    reach = 2.0 * distance
-    floor = TriMesh(np.array([[-reach, -reach, lo[2]], [reach, -reach, lo[2]], [reach, reach, lo[2]],
-                              [-reach, reach, lo[2]]]), np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32))
-    world = MeshWorld([mesh, floor])
+    floor = box_mesh(np.array([4.0 * distance, 4.0 * distance, 0.01]))
+    world = MeshWorld([mesh, TriMesh(floor.vertices + [0.0, 0.0, lo[2] - 0.005], floor.triangles)])
     rng = rng or np.random.default_rng(0)
     views = []
     for direction in directions:

@@ -147,13 +147,12 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 if right and truth is not None and session.registered:
                     row["map_error_mm"], row["map_error_deg"] = _errors(obj.pose, _in_map(session, obj, truth))
                 mesh = next((m.mesh for m in session.models if m.name == obj.model), None)
-                if mesh is None or obj.pose is None:
-                    pass
-                elif right and truth is not None:  # symmetric objects: where the surface is, not the frame
-                    row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
-                elif not right:  # a wrong model: how well it explains what is there
-                    row["wrong_model_fit_mm"] = 1e3 * float(
-                        surface_distances(mesh, obj.pose, np.eye(4), onto=body.mesh).mean())
+                if mesh is not None and obj.pose is not None:
+                    if right and truth is not None:  # symmetric objects: where the surface is, not the frame
+                        row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
+                    elif not right:  # a wrong model: how well it explains what is there
+                        row["wrong_model_fit_mm"] = 1e3 * float(
+                            surface_distances(mesh, obj.pose, np.eye(4), onto=body.mesh).mean())
                 if obj.fused is not None and right:
                     row["fused_error_mm"], row["fused_error_deg"] = _errors(obj.fused.pose, truth)
                     row["fused_members"] = int(len(obj.fused.members))

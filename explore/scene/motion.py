@@ -120,7 +120,7 @@ class Mover:
     localise : a base with a planar laser localises its belief in the known environment after
         every leg (:meth:`localise`); False: odometry only
     refine_localisation : refine each correlative laser match by point-to-plane ICP on the known
-        surfaces (:func:`~explore.perception.refine_planar`)
+        surfaces (:class:`~explore.perception.PlanarSurface`)
     """
 
     def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
@@ -150,7 +150,7 @@ class Mover:
         self._drift_var = np.zeros(2)  # the same since the belief was last localised
         self._laser_rng = np.random.default_rng([seed, 1])
         self._field: Any = None  # likelihood field of the known environment, built on first use
-        self._surface: tuple[Points3, Points3] | None = None  # its surface samples and normals
+        self._surface: Any = None  # its surface samples and normals (a PlanarSurface), with the field
         self.localisations = 0
         self.localising = bool(localise)
         self.refine_localisation = bool(refine_localisation)
@@ -331,11 +331,11 @@ class Mover:
         if local is None or len(local) < 20:
             return False
         if self._field is None:
-            from explore.perception import LikelihoodField
+            from explore.perception import LikelihoodField, PlanarSurface
             from explore.scene.scene_objects import environment_surface
 
-            self._surface = environment_surface(self.sim)
-            self._field = LikelihoodField(self._surface[0])
+            points, normals = environment_surface(self.sim)
+            self._field, self._surface = LikelihoodField(points), PlanarSurface(points, normals)
         believed = _planar(*self.believed_q[[ix, iy, ith]])
         trans, rot = np.sqrt(self._drift_var)
         search = (float(np.clip(3.0 * trans, 0.05, 0.5)), float(np.clip(3.0 * rot, math.radians(1.0),
@@ -345,9 +345,7 @@ class Mover:
             return False
         matched = correction @ believed
         if self.refine_localisation:  # the correlative match is a 1 cm grid answer: refine it on the surfaces
-            from explore.perception import refine_planar
-
-            refined = refine_planar(transform_points(matched, local), *self._surface, matched[:2, 3])
+            refined = self._surface.refine(transform_points(matched, local), matched[:2, 3])
             if refined is not None:
                 moved, turned = pose_error(refined[0] @ matched, matched)
                 if moved <= 0.03 and turned <= math.radians(1.0):  # within the correlative match's cell

@@ -73,9 +73,9 @@ class SceneSettings:
     split_distance: float = 0.015
     split_share: float = 0.1
     register: bool = True
-    flying_pixel_filter: float = 0.02
-    median_px: int = 0
-    organised_normals: bool = True
+    flying_pixel_filter: float = DepthProcessing.flying_pixel_filter
+    median_px: int = DepthProcessing.median_px
+    organised_normals: bool = DepthProcessing.organised_normals
 
     @property
     def depth_processing(self) -> DepthProcessing:
