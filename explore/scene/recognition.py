@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core import Pose, invert, pose_error, transform_points
+from explore.core import Pose, invert, pose_error, reaches, transform_points
 from explore.perception import (
     ACCEPT_FROM,
     Q_H_MIN,
@@ -140,14 +140,19 @@ class Recognition:
         Every model the merged views proposed is recognised in each recognition view alone
         (q_h and the PVS votes per view); if at least
         ``multi_view_agree`` of these poses agree (:func:`fuse_poses`) and the PVS accepts the
-        fused pose, the object is recognised there.
+        fused pose, the object is recognised there. Only views whose hypothesis explains their
+        part of the cluster count (q_h at the threshold): a partial match (the model confirmed,
+        the rest of the cluster unexplained, :func:`accepted`) says something else is there too,
+        which only the merged path splits off; agreeing partial matches let a small model learned
+        earlier in the run claim a larger object (room40: a jenga block at q_h 0.22).
         """
         scene = self.scene
+        min_q_h = self.min_q_h
         best: tuple[str, FusedPose, list[Hypothesis]] | None = None
         for name in sorted({h.model for h in obj.hypotheses}):
             for view in self.recognition_cluster(obj).view_ids:
                 self._check_view(obj, int(view), [name])
-            mine = [h for _, h in obj.view_hypotheses if h.model == name]
+            mine = [h for _, h in obj.view_hypotheses if h.model == name and reaches(h.q_h, min_q_h)]
             if len(mine) < scene.settings.multi_view_agree:
                 continue
             fused = fuse_poses([h.pose for h in mine], [h.q_h for h in mine])
@@ -267,32 +272,42 @@ class Recognition:
         if found is not None:
             obj.view_hypotheses.append((int(view), found))
 
-    def settle_from_views(self, obj: SceneObject) -> str:
-        """Resolve an ambiguous object with the views already taken (no new ones): fuse and decide."""
+    def settle_from_views(self, obj: SceneObject, more_views: int = 0) -> str:
+        """Resolve an ambiguous object with the views already taken: fuse and decide; if they do
+        not settle it, look again from up to ``more_views`` new views (Kriegel Sec. 5.6.2: a mug
+        whose handle the patrol's views hid is recognised once a view shows it)."""
         if obj.status != AMBIGUOUS:
             return obj.status
         self.collect_view_hypotheses(obj)
         self.fuse(obj)
         self.validate(obj)
+        for _ in range(more_views):
+            if obj.status != AMBIGUOUS or not self._look_again(obj):
+                break
         self._settle_ambiguous(obj)
         return obj.status
 
-    def multi_view_step(self, obj: SceneObject) -> bool:
-        """One more view of an ambiguous object; True when it is resolved or out of views."""
+    def _look_again(self, obj: SceneObject) -> bool:
+        """Take one more view of the object and recognise it again; False when no view is left."""
         scene = self.scene
         more = obj.multi_views < scene.settings.multi_view_views
         view = scene.viewing.next_view(obj, f"multi-view {obj.id}") if more else None
         if view is None:
             obj.note("no further view for multi-view recognition")
-            self._settle_ambiguous(obj)
-            return True
+            return False
         obj.multi_views += 1
         scene.segment()
         self.recognise(obj)
         self.validate(obj)  # collects the new view's hypothesis and fuses
         scene.say(f"object {obj.id}: multi-view {obj.multi_views}, {obj.status}"
                   + (f", fused {len(obj.fused.members)} of {len(obj.view_hypotheses)}" if obj.fused else ""))
-        if obj.status == RECOGNISED:
+        return True
+
+    def multi_view_step(self, obj: SceneObject) -> bool:
+        """One more view of an ambiguous object; True when it is resolved or out of views."""
+        scene = self.scene
+        if not self._look_again(obj):
+            self._settle_ambiguous(obj)
             return True
         if obj.status != AMBIGUOUS:
             return True

@@ -155,8 +155,6 @@ class SceneSession:
         return self.settings.max_views - len(self.views)
 
 
-
-
     # -- segmentation and association ------------------------------------------------------------
     def segment(self) -> list[SceneObject]:
         """Segment the views taken since the last call and attach their clusters to objects."""
@@ -231,16 +229,6 @@ class SceneSession:
                     break
 
 
-
-
-
-
-
-
-
-
-
-
     # -- the whole loop --------------------------------------------------------------------------
     def step(self) -> bool:
         """One round of Fig. 3.1; True when the scene is explained or the budget is spent."""
@@ -287,6 +275,5 @@ class SceneSession:
         from explore.scene.metrics import evaluate
 
         return evaluate(self)
-
 
 
