@@ -150,9 +150,10 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 if mesh is not None and obj.pose is not None:
                     if right and truth is not None:  # symmetric objects: where the surface is, not the frame
                         row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
-                    elif not right:  # a wrong model: how well it explains what is there
-                        row["wrong_model_fit_mm"] = 1e3 * float(
-                            surface_distances(mesh, obj.pose, np.eye(4), onto=body.mesh).mean())
+                    elif not right:  # a wrong model: how well it and the object's surface overlay, both ways
+                        row["wrong_model_fit_mm"] = 1e3 * float(max(  # (a small model fits a larger object one way)
+                            surface_distances(mesh, obj.pose, np.eye(4), onto=body.mesh).mean(),
+                            surface_distances(body.mesh, np.eye(4), obj.pose, onto=mesh).mean()))
                 if obj.fused is not None and right:
                     row["fused_error_mm"], row["fused_error_deg"] = _errors(obj.fused.pose, truth)
                     row["fused_members"] = int(len(obj.fused.members))
