@@ -367,20 +367,19 @@ class LearnObject(ExploreBehaviour):
 
 
 class SettleFromViews(ExploreBehaviour):
-    """Resolve the current ambiguous object with the views already taken (fused per-view poses),
-    then with up to ``more_views`` new ones; one left unknown joins the ``unknown`` list to be learned."""
+    """Resolve the current ambiguous object with the views already taken (fused per-view poses);
+    one left unknown joins the ``unknown`` list, to be learned."""
 
     name = "settle_from_views"
     reads = ("scene", "object", "unknown")
     writes = ("unknown",)
     blocking = True
-    params = (Param("more_views", int, 0, "", "new views per object when the views taken do not settle it", low=0),)
 
     def work(self) -> Outcome:
         obj = _current(self, "ambiguous")
         if obj is None:
             return success("nothing ambiguous")
-        status = _scene(self).recognition.settle_from_views(obj, self.p["more_views"])
+        status = _scene(self).recognition.settle_from_views(obj)
         if status == "unknown":
             self.write("unknown", [*(self.read("unknown") or []), obj.id])
         self.context.status_line = _status(self)
