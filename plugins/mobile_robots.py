@@ -199,8 +199,6 @@ class MobileManipulator(BulletRobot):
         return [(here, home)] + [(np.array([bx[i], by[i], heading[i]]), seeds[i]) for i in order]
 
 
-
-
 class MobileBase(BulletRobot):
     """Mobile base with a camera on a mast, optional pan-tilt head (Goerner, Kriegel's omniRob)."""
 
@@ -324,8 +322,6 @@ class MobileBase(BulletRobot):
                 continue
             return q
         return None
-
-
 
 
 PLUGINS = [MobileManipulator, MobileBase]

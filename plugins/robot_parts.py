@@ -200,5 +200,3 @@ def declare_laser(robot: BulletRobot) -> None:
         raise ValueError(f"base_size {list(robot.base_size)}: every side must be positive")
     if robot.laser_height > 0:
         robot.capabilities = robot.capabilities | {Capability.PLANAR_LASER}
-
-

@@ -131,8 +131,6 @@ class FreeFlyer(BulletRobot):
         return q
 
 
-
-
 class Arm(BulletRobot):
     """Fixed industrial arm (KUKA iiwa, 7 DOF) with an eye-in-hand sensor; IK with restarts."""
 
@@ -226,8 +224,6 @@ class Arm(BulletRobot):
                 continue
             return q
         return None
-
-
 
 
 PLUGINS = [FreeFlyer, Arm]

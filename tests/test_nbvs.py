@@ -141,7 +141,6 @@ def test_expected_utility_weights_by_probability(cluttered) -> None:
     assert again.value == eu.value  # deterministic for a seed
 
 
-
 def test_filter_pipeline_counts_are_monotone(open_world, registry) -> None:
     with open_world("cluttered") as sim:
         session = NBVSSession(sim, registry, expected=True, k=10, n_samples=2000, seed=0, top=5)

@@ -319,5 +319,3 @@ class PVS(PVSFeatures, PVSQueries):
         self._visited = None
         self.lattice = new_lo
         self._touch()
-
-

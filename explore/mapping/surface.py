@@ -409,5 +409,3 @@ class SurfaceModel(SurfaceFeatures):
     def n_max(self) -> float:
         """N_max = √2 π R_n² / R_r², points of a close-packed R_n disc (Eq. 4.25)."""
         return float(np.sqrt(2.0) * np.pi * self.normal_radius**2 / self.point_spacing**2)
-
-

@@ -159,4 +159,3 @@ def rigid_first_hit(
                                grid_lo, grid_hi, space_margin) < 0.0:
                 return i, tested
     return -1, tested
-

@@ -439,5 +439,3 @@ class ModellingSession(Evaluation, CandidatePlanning):
         if self.status == "running":
             self.status = "stopped"
         return ModellingResult(self.status, self.reason, self.records, self.metrics())
-
-

@@ -315,5 +315,3 @@ class NBVSSession(Reporting, Scoring, StateSampling):
             if progress is not None:
                 progress(record)
         return self.summary()
-
-

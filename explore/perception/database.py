@@ -206,7 +206,6 @@ class ObjectDatabase:
             self.connection.close()
             self._closed = True
 
-
     def __enter__(self) -> ObjectDatabase:
         return self
 
@@ -457,5 +456,3 @@ def _put_descriptor(con: sqlite3.Connection, object_id: int, kind: str, array: n
         "INSERT OR REPLACE INTO descriptors (object_id, kind, params, blob, created) VALUES (?, ?, ?, ?, ?)",
         (object_id, kind, json.dumps(dict(params), sort_keys=True), buffer.getvalue(), _now()),
     )
-
-

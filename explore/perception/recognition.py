@@ -47,4 +47,3 @@ def model_descriptors(model: Model, recognizers: Sequence[Any] | None = None) ->
     """
     chosen = list(recognizers) if recognizers is not None else [PPFRecognizer(), VFHRecognizer()]
     return {r.descriptor_kind: r.describe(model) for r in chosen if hasattr(r, "describe")}
-

@@ -155,5 +155,3 @@ def _failed_steps(root: Any) -> list[Any]:
 
     return [n for n in root.iterate() if n.status == Status.FAILURE and n.feedback_message and not n.children
             and not getattr(n, "is_condition", False)]
-
-

@@ -154,7 +154,6 @@ class SceneSession:
     def budget_left(self) -> int:
         return self.settings.max_views - len(self.views)
 
-
     # -- segmentation and association ------------------------------------------------------------
     def segment(self) -> list[SceneObject]:
         """Segment the views taken since the last call and attach their clusters to objects."""
@@ -228,7 +227,6 @@ class SceneSession:
                 if merged:
                     break
 
-
     # -- the whole loop --------------------------------------------------------------------------
     def step(self) -> bool:
         """One round of Fig. 3.1; True when the scene is explained or the budget is spent."""
@@ -275,5 +273,3 @@ class SceneSession:
         from explore.scene.metrics import evaluate
 
         return evaluate(self)
-
-
