@@ -147,6 +147,29 @@ def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_
     assert block["clusters"] == 1  # the split-off points lie on the block
 
 
+def test_a_partial_match_in_one_view_confirms_no_pose(open_world, registry, tmp_path):
+    """The duck and the block touching it, before the split: each view's points fit the duck's
+    rendering (a partial match, which the merged path accepts and splits) but do not explain the
+    view, so no view confirms the duck there (agreeing partial matches let a small model claim a
+    larger object)."""
+    from explore.perception import accepted
+
+    with open_world(_world(tmp_path, TOUCHING)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+        db.seed_from_world(sim)
+        scene = SceneSession(sim, registry, db)
+        scene.viewing.overview()
+        (obj,) = scene.segment()
+        views = [int(v) for v in obj.cluster.view_ids]
+        partial = []
+        for view in views:
+            part = obj.cluster.only_view(view)
+            hypotheses = scene.recognizer.recognize(part, [m for m in scene.models if m.name == "duck"],
+                                                    {view: scene.views[view].scan})
+            partial += [h for h in accepted(hypotheses) if h.q_h < 0.5]
+        assert partial and all(h.render_fit >= 0.9 for h in partial)  # the premise: partial matches per view
+        assert all(scene.recognition.view_hypothesis(obj, view, ["duck"]) is None for view in views)
+
+
 def test_empty_scene_is_explained_with_no_objects(registry, tmp_path):
     from explore.runtime import RunConfig, execute
 
