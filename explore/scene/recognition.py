@@ -330,9 +330,9 @@ class Recognition:
         return refined
 
     def _settle_ambiguous(self, obj: SceneObject) -> None:
-        """Out of views: keep the fused pose if enough views agree, or if the robot could not reach a
-        confirming view and the validated hypothesis has no rival (Kriegel's single-view
-        recognition: q_h and the PVS votes passed); else the object is unknown."""
+        """Out of views (none reachable, or the patrol's views all used): keep the fused pose if enough
+        views agree, or if the validated hypothesis has no rival although no second view confirms it
+        (Kriegel's single-view recognition: q_h and the PVS votes passed); else the object is unknown."""
         scene = self.scene
         if obj.status != AMBIGUOUS:
             return
@@ -342,7 +342,7 @@ class Recognition:
             obj.pose = self.refined(obj, obj.fused.pose)
             obj.status = RECOGNISED
             obj.note("recognised by the fused per-view poses" if agreed else
-                     f"recognised from {len(obj.fused.members)} view(s): no confirming view was reachable")
+                     f"recognised from {len(obj.fused.members)} view(s): no second view confirmed it")
             if obj.recognised_after_views is None:
                 obj.recognised_after_views = len(scene.views)
         else:
