@@ -142,7 +142,7 @@ class Recognition:
         agree (:func:`fuse_poses`: the merged views, which confirm a recognition otherwise, do not
         here) and the PVS accepts the fused pose, the object is recognised there. Two was too few:
         in four runs of the 40-object room all 8 objects two agreeing views recognised were
-        another object's model; the right ones had 3 or 4. The merged views cannot stand in:
+        another object's model; the right ones had 3 to 5. The merged views cannot stand in:
         on a noisy base without a laser they fit the right model at the fused pose with q_h 0.11.
         """
         scene = self.scene
