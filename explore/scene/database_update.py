@@ -27,6 +27,7 @@ class DatabaseUpdate:
 
     def __init__(self, scene: SceneSession) -> None:
         self.scene = scene
+        self._remembered: dict[int, tuple[str, bytes]] = {}  # object id -> (model, pose) last recorded
 
     # -- the object database -------------------------------------------------------------------
     def add_to_database(self, obj: SceneObject, world_mesh: TriMesh, scans: int) -> str:
@@ -66,8 +67,13 @@ class DatabaseUpdate:
         return f"{stem}-{k}"
 
     def remember_locations(self) -> None:
-        """Record where each recognised object was seen (the database's last known location)."""
+        """Record where each recognised object was seen (the database's last known location), once per
+        recognition: a call that finds the same model at the same pose adds no row."""
         scene = self.scene
         for obj in scene.by_status(RECOGNISED):
             if obj.model is not None and obj.pose is not None and obj.model in scene.db:
+                seen = (obj.model, np.asarray(obj.pose, dtype=float).tobytes())
+                if self._remembered.get(obj.id) == seen:
+                    continue
                 scene.db.set_location(obj.model, scene.sim.spec.name, obj.pose, np.vstack(obj.cluster.aabb))
+                self._remembered[obj.id] = seen
