@@ -31,15 +31,19 @@ def test_sparse_gives_the_dense_numbers(bunny_scans, mode: str, tmp_path) -> Non
     """Same scans, same voxels, same log-odds, queries, rays, entropy and .bt bytes (both update rules)."""
     scans, lo, hi = bunny_scans
     dense, sparse = PVS(lo, hi, 0.005, mode=mode), SparsePVS(lo, hi, 0.005, mode=mode)
+    rng = np.random.default_rng(0)
+    probe = rng.uniform(lo - 0.05, hi + 0.05, (20_000, 3))
     for scan in scans:
         assert dense.integrate(scan) == sparse.integrate(scan)
+        # the planners' free-space test, its block bitmap rebuilt after every scan
+        for p in (0.4, 0.6, 0.75, 0.97):
+            assert np.array_equal(sparse.probability_below(probe, p), dense.probability(probe) < p)
+    assert 0 < np.count_nonzero(~sparse.probability_below(probe, 0.75)) < len(probe)
     assert np.array_equal(sparse.window(lo, hi).log_odds, dense.log_odds)
     assert np.count_nonzero(dense.log_odds) > 50_000
     for thresholds in ("validation", "planning", "octomap"):
         assert sparse.counts(thresholds) == dense.counts(thresholds)
     assert sparse.non_free_count() == dense.non_free_count()
-    rng = np.random.default_rng(0)
-    probe = rng.uniform(lo - 0.05, hi + 0.05, (20_000, 3))
     assert np.array_equal(sparse.probability(probe), dense.probability(probe))
     assert np.array_equal(sparse.state(probe, "vasquez"), dense.state(probe, "vasquez"))
     eyes = CENTRE + rng.normal(0.0, 0.3, (200, 3))

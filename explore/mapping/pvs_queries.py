@@ -33,6 +33,11 @@ class PVSQueries:
         lo = self.log_odds_at(points).astype(np.float64)
         return 1.0 / (1.0 + np.exp(-lo))
 
+    def probability_below(self, points: Points3, p: float) -> np.ndarray:
+        """``probability(points) < p`` (n,) bool: the free-space test motion planning makes for every
+        robot pose it samples."""
+        return self.probability(points) < p
+
     def log_odds_at(self, points: Points3) -> np.ndarray:
         """Log-odds (n,) float32 of the voxels containing ``points``; 0 (unknown) outside the grid."""
         ijk, inside = self.index(points)

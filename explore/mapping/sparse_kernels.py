@@ -441,6 +441,35 @@ def lookup(store, voxels):
     return out
 
 
+@njit(cache=True, nogil=True)
+def block_peaks(store):
+    """Coordinates (m, 3) and largest log-odds (m,) of every block (a uniform block: its value)."""
+    coords, rows, peak = blocks_of(store)
+    values = store[3]
+    for j in range(rows.shape[0]):
+        if rows[j] >= 0:
+            peak[j] = values[rows[j]].max()
+    return coords, peak
+
+
+@njit(cache=True, nogil=True)
+def lookup_marked(store, marked, first, lat, ext, inv_res, points):
+    """Log-odds (n,) at ``points`` whose block is set in ``marked`` (a dense block bitmap whose
+    index 0 is block ``first``); 0 for every other point and outside the bounds [lat, lat + ext)."""
+    out = np.zeros(points.shape[0], np.float32)
+    for i in range(points.shape[0]):
+        a0 = np.int64(np.floor(points[i, 0] * inv_res))
+        a1 = np.int64(np.floor(points[i, 1] * inv_res))
+        a2 = np.int64(np.floor(points[i, 2] * inv_res))
+        if not (0 <= a0 - lat[0] < ext[0] and 0 <= a1 - lat[1] < ext[1] and 0 <= a2 - lat[2] < ext[2]):
+            continue
+        b0, b1, b2 = (a0 >> SHIFT) - first[0], (a1 >> SHIFT) - first[1], (a2 >> SHIFT) - first[2]
+        if (0 <= b0 < marked.shape[0] and 0 <= b1 < marked.shape[1] and 0 <= b2 < marked.shape[2]
+                and marked[b0, b1, b2]):
+            out[i] = value_at(store, a0, a1, a2)
+    return out
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _free_neighbour(store, a0, a1, a2, lat, ext, l_free_below):
     """True if one of the 6 neighbours (inside the bounds) of voxel (a0, a1, a2) is free."""

@@ -29,6 +29,7 @@ from explore.sim import Scan, TriMesh
 
 DENSE_MAX_VOXELS = 32_000_000  # auto layout: a dense grid up to this size (128 MB of log-odds), else sparse
 WINDOW_MAX_VOXELS = 64_000_000  # the largest dense window the sparse PVS hands out
+MARKED_MAX_BLOCKS = 256_000_000  # the largest block bitmap of probability_below (256 MB), else hash lookups
 KEY_LIMIT = S.KEY_OFFSET  # voxel keys stay within [-2^20, 2^20) per axis
 
 
@@ -121,6 +122,38 @@ class SparsePVS(PVS):
         lo = np.zeros(len(ijk), dtype=np.float32)
         lo[inside] = S.lookup(self._store, np.ascontiguousarray(ijk[inside] + self.lattice))
         return lo
+
+    def probability_below(self, points: Points3, p: float) -> np.ndarray:
+        """As :meth:`PVS.probability_below`, with the hash table asked only for points in blocks that hold a
+        voxel of probability p or more (a bitmap of those blocks, built once per map version): a robot
+        pose mostly lies in free or unknown space, where this skips the table."""
+        marked = self._marked_blocks(p) if p > 0.5 else None
+        if marked is None:
+            return super().probability_below(points, p)
+        pts = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 3))
+        lo = S.lookup_marked(self._store, *marked, self.lattice, self._extent, 1.0 / self.resolution, pts)
+        below = np.ones(len(pts), dtype=bool)  # log-odds 0: probability 0.5 < p
+        looked = np.flatnonzero(lo)
+        below[looked] = 1.0 / (1.0 + np.exp(-lo[looked].astype(np.float64))) < p
+        return below
+
+    def _marked_blocks(self, p: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """(bitmap, first block) of the blocks whose largest probability is p or more (with a margin far
+        above rounding, so every other voxel is surely below p); None if the bitmap would be too large."""
+        key = f"marked {p!r}"
+        cached = self._cache.get(key)
+        if cached is None or cached[0] != self.version:
+            coords, peak = S.block_peaks(self._store)
+            coords = coords[peak >= np.float32(logit(p) - 1e-3)]
+            first = coords.min(axis=0) if len(coords) else np.zeros(3, np.int64)
+            size = coords.max(axis=0) - first + 1 if len(coords) else np.zeros(3, np.int64)
+            marked = None
+            if math.prod(int(v) for v in size) <= MARKED_MAX_BLOCKS:
+                grid = np.zeros(tuple(int(v) for v in size), np.bool_)
+                grid[tuple((coords - first).T)] = True
+                marked = (grid, first)
+            self._cache[key] = cached = (self.version, marked)
+        return cached[1]
 
     def _stored(self, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Absolute voxel keys (m, 3) and log-odds (m,) of every observed voxel (log-odds not 0), of the blocks

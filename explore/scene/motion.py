@@ -236,7 +236,7 @@ class Mover:
         if pvs is None:
             return MotionProblem(self.robot)
         # outside its grid the PVS answers 0.5 (free here): only robot parts near the grid are tested
-        return MotionProblem(self.robot, space_free=lambda points: pvs.probability(points) < limit,
+        return MotionProblem(self.robot, space_free=lambda points: pvs.probability_below(points, limit),
                              space_bounds=(pvs.min_corner, pvs.max_corner))
 
     def move(self, target: Target, configs: list | None = None) -> Move | None:
