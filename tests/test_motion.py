@@ -327,6 +327,35 @@ def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(open_world) -> Non
         assert min(gaps) >= 0.2 - 0.03  # surface samples every 3 cm
 
 
+def test_a_base_pose_is_blocked_by_a_wall_in_the_sparse_pvs_as_the_full_test_finds(open_world) -> None:
+    """A wall of occupied voxels in a room-sized sparse PVS, 1.2 m ahead of the mobile manipulator: along a
+    drive through it the planar checker (moved surface samples, the PVS's block bitmap) gives the verdict of
+    the full test at every base pose, blocked only near the wall."""
+    from test_pvs import make_scan
+
+    from explore.mapping import SparsePVS
+    from explore.motion import PlanarChecker
+
+    with open_world("scene_small_mm") as sim:
+        robot = sim.robot
+        x0, y0, heading = robot.q[:3]
+        pvs = SparsePVS([-3.0, -3.0, -0.1], [3.0, 3.0, 1.5], 0.01)
+        ys, zs = np.meshgrid(np.linspace(y0 - 0.3, y0 + 0.3, 61), np.linspace(0.05, 1.0, 96))
+        origins = np.column_stack([np.full(ys.size, x0), ys.ravel(), zs.ravel()])
+        for _ in range(3):  # three returns: p > 0.75
+            pvs.integrate(make_scan(origins, np.tile([1.0, 0.0, 0.0], (ys.size, 1)), np.full(ys.size, 1.2),
+                                    max_range=2.0))
+        problem = MotionProblem(robot, space_free=lambda points: pvs.probability_below(points, 0.75),
+                                space_bounds=(pvs.min_corner, pvs.max_corner))
+        checker, empty = PlanarChecker(problem, robot.q), PlanarChecker(MotionProblem(robot), robot.q)
+        drive = [np.array([x, y0, heading]) for x in np.linspace(x0, x0 + 1.6, 60)]
+        verdicts = [checker(qb) for qb in drive]
+        assert verdicts == [problem.is_valid(checker.full(qb)) for qb in drive]
+        assert all(empty(qb) for qb in drive)
+        blocked = [float(qb[0] - x0) for qb, ok in zip(drive, verdicts, strict=True) if not ok]
+        assert len(blocked) > 10 and 1.2 - checker.radius < blocked[0] and blocked[-1] < 1.2 + checker.radius
+
+
 _ROADMAP_SOLVES = """
 import sys
 import numpy as np

@@ -31,7 +31,8 @@ def planar_points_clearance(
     Returns the smallest distance from a point to the boxes [lo_b, hi_b] (inf when none is
     nearer than ``reach``: boxes whose xy rectangle is farther than ``radius`` + ``reach``
     from (x, y), ``radius`` bounding the points' distance from the base axis, are skipped)
-    and the number of points inside the box [box_lo, box_hi] (the PVS grid).
+    and the number m of points inside the box [box_lo, box_hi] (the PVS grid): ``out[:m]``
+    holds those in their order, ``out[m:]`` the others.
     """
     c, s = math.cos(theta), math.sin(theta)
     near = np.empty(lo.shape[0], dtype=np.int64)
@@ -42,18 +43,22 @@ def planar_points_clearance(
             near[count] = b
             count += 1
     best = np.inf
-    inside = 0
+    inside, outside = 0, local.shape[0]
     for i in range(local.shape[0]):
         px = c * local[i, 0] - s * local[i, 1] + x
         py = s * local[i, 0] + c * local[i, 1] + y
         pz = z[i]
-        out[i, 0], out[i, 1], out[i, 2] = px, py, pz
         for k in range(count):
             d = _box_sq_distance(px, py, pz, lo, hi, near[k])
             if d < best:
                 best = d
         if box_lo[0] <= px <= box_hi[0] and box_lo[1] <= py <= box_hi[1] and box_lo[2] <= pz <= box_hi[2]:
+            j = inside
             inside += 1
+        else:
+            outside -= 1
+            j = outside
+        out[j, 0], out[j, 1], out[j, 2] = px, py, pz
     return math.sqrt(best), inside
 
 

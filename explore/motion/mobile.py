@@ -113,9 +113,7 @@ class PlanarChecker:
             return False
         space_free = self.problem.space_free
         if space_free is not None and inside:
-            points = self._points
-            near = points[np.all((points >= self._box[0]) & (points <= self._box[1]), axis=1)]
-            if not bool(np.all(self.problem.points_free(near))):
+            if not bool(np.all(self.problem.points_free(self._points[:inside]))):
                 return False
         if clearance >= self.margin + self.slack:
             return True
