@@ -173,6 +173,26 @@ def ig_throughput(pvs: PVS, scans: list[Scan], poses: list, candidates: int) -> 
             "ig_candidates": candidates, "ig_beams_per_candidate": len(beams[0][0])}
 
 
+def free_space_test(pvs: PVS, poses: int = 200, seed: int = 0) -> dict[str, float]:
+    """The planners' free-space test (``probability_below(points, 0.75)``, a block bitmap before the hash
+    table) against a lookup of every point (``probability(points) < 0.75``): 17 115 points of a robot-sized
+    box (0.6 x 0.6 x 1.2 m, as the mobile manipulator's surface samples) at random base poses in the room."""
+    rng = np.random.default_rng(seed)
+    robot = rng.uniform([-0.3, -0.3, 0.0], [0.3, 0.3, 1.2], (17_115, 3))
+    sets = [robot + (*rng.uniform(-2.2, 2.2, 2), 0.0) for _ in range(poses)]
+    same = all(np.array_equal(pvs.probability_below(s, 0.75), pvs.probability(s) < 0.75) for s in sets[:20])
+    start = time.perf_counter()
+    for points in sets:
+        _ = pvs.probability(points) < 0.75
+    every = (time.perf_counter() - start) / poses
+    start = time.perf_counter()
+    for points in sets:
+        pvs.probability_below(points, 0.75)
+    bitmap = (time.perf_counter() - start) / poses
+    return {"free_test_every_point_ms": 1e3 * every, "free_test_bitmap_ms": 1e3 * bitmap,
+            "free_test_ratio": every / bitmap, "free_test_same": same}
+
+
 def benchmark(views: int, resolution: float, dense: bool, candidates: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         world = Path(tmp) / "room5x5.yaml"
@@ -207,6 +227,7 @@ def benchmark(views: int, resolution: float, dense: bool, candidates: int) -> di
         row.update({"sparse_sm_points_per_s": beams / t_sm, "sparse_sm_bytes": sm.nbytes,
                     "sparse_sm_blocks": sm.blocks})
         row.update(ig_throughput(sm, scans, poses, candidates))
+        row.update(free_space_test(sm))
         del sm
         if dense:
             print("dense PVS ...", file=sys.stderr)
@@ -250,6 +271,9 @@ def table(r: dict) -> str:
         f"({r['voxels_disagree']} differ)",
         f"entropy casting on the sparse map: {r['ig_visited_visits_per_s'] / 1e6:.1f} M voxel visits/s with visited "
         f"marking, {r['ig_parallel_visits_per_s'] / 1e6:.1f} M/s parallel",
+        f"planners' free-space test of 17 115 robot points: {r['free_test_bitmap_ms']:.2f} ms per pose with the "
+        f"block bitmap, {r['free_test_every_point_ms']:.2f} ms looking up every point "
+        f"({r['free_test_ratio']:.1f}x, {'the same' if r['free_test_same'] else 'DIFFERENT'} answers)",
     ]
     return "\n".join(lines)
 
