@@ -243,6 +243,23 @@ class SegmentScene(ExploreBehaviour):
         return success(f"{len(objects)} objects")
 
 
+class LookCloser(ExploreBehaviour):
+    """Aim views at the objects seen with too few points to be objects before they are called noise,
+    and segment them."""
+
+    name = "look_closer"
+    reads = ("scene",)
+    blocking = True
+    params = (Param("views", int, 2, "", "views per object seen with too few points (0: none)", low=0),)
+
+    def work(self) -> Outcome:
+        scene = _scene(self)
+        glimpsed, views = scene.viewing.look_closer(self.p["views"])
+        self.context.status_line = _status(self)
+        small = sum(len(o.cluster.points) < scene.settings.min_points for o in scene.objects)
+        return success(f"{glimpsed} seen with too few points, {views} views aimed at them, {small} left too small")
+
+
 class RecogniseObjects(ExploreBehaviour):
     """Recognise every object not yet explained against the database (PPF / FPFH / VFH)."""
 
@@ -481,6 +498,7 @@ PLUGINS = [
     StartScene,
     SceneOverview,
     SegmentScene,
+    LookCloser,
     RecogniseObjects,
     ValidateObjects,
     MultiViewStep,

@@ -71,6 +71,7 @@ class SceneObject:
     fused: FusedPose | None = None
     multi_views: int = 0
     modelling_scans: int = 0
+    closer_looks: int = 0
     coverage_estimate: float = math.nan
     surface_points: Points3 | None = None
     recognised_after_views: int | None = None

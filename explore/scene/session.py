@@ -233,6 +233,7 @@ class SceneSession:
         if not self.views:
             self.viewing.overview()
             self.segment()
+            self.viewing.look_closer()
             self.recognition.recognise_all()
             return self.all_explained
         self.recognition.resolve_ambiguous()
@@ -266,6 +267,9 @@ class SceneSession:
                  "rejected": o.rejected, "events": o.events}
                 for o in self.candidates()
             ],
+            "too_small": [{"id": o.id, "points": int(len(o.cluster.points)), "views": len(o.cluster.view_ids),
+                           "closer_looks": o.closer_looks}
+                          for o in self.objects if len(o.cluster.points) < self.settings.min_points],
         }
 
     def metrics(self) -> dict[str, Any]:

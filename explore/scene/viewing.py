@@ -140,6 +140,25 @@ class ViewTaking:
                 break
         return None
 
+    def look_closer(self, views: int = 2) -> tuple[int, int]:
+        """Views aimed at the objects seen with fewer than ``min_points`` points, up to ``views`` per
+        object over the run, segmented as they come, until the object has the points of an object (or
+        is merged into another): a small part between others (an upright domino in a grid of objects)
+        may show its narrow side to every patrol view. (glimpsed objects, views taken)."""
+        scene = self.scene
+        least = scene.settings.min_points
+        glimpsed = [o for o in scene.objects if len(o.cluster.points) < least]
+        taken = 0
+        for obj in glimpsed:
+            while obj in scene.objects and len(obj.cluster.points) < least and obj.closer_looks < views \
+                    and scene.budget_left > 0:
+                obj.closer_looks += 1
+                if self.next_view(obj, "closer look") is None:
+                    break
+                taken += 1
+                scene.segment()
+        return len(glimpsed), taken
+
     def already_taken(self, target: Target, eye_tol: float = 0.02, angle_tol_deg: float = 5.0) -> bool:
         """A view was already taken from (about) ``target``'s pose: in a static scene it would
         show the same surface again (an NBS utility that cannot see why its gain never comes
