@@ -37,6 +37,10 @@ objects:
      known: true}
   - {name: block, box: [0.05, 0.07, 0.06], position: [0.127, -0.12], on_top_of: table}
 """ + TABLE
+SMALL_PART = """name: small_part
+objects:
+  - {name: cube, box: [0.025, 0.025, 0.025], position: [0.1, 0.1], on_top_of: table}
+""" + TABLE
 # scene_small with the objects moved and turned (a second run on a re-arranged scene)
 REARRANGED = """name: scene_small_rearranged
 objects:
@@ -145,6 +149,29 @@ def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_
     assert row["pose_error_mm"] < 5.0 and row["pose_error_deg"] < 2.0
     block = next(r for r in metrics["objects"] if r["name"] == "block")
     assert block["clusters"] == 1  # the split-off points lie on the block
+
+
+@pytest.mark.parametrize("views", [0, 2])
+def test_an_object_seen_with_too_few_points_gets_a_closer_look(open_world, registry, tmp_path, views: int):
+    """A 2.5 cm cube 1.1 m from the overview camera shows 30-59 points, fewer than an object needs
+    (60): one view aimed at it gives it the points of an object; without closer looks it stays
+    noise, listed as too small in the summary."""
+    with open_world(_world(tmp_path, SMALL_PART)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+        scene = SceneSession(sim, registry, db)
+        scene.viewing.overview()
+        scene.segment()
+        (glimpse,) = scene.objects
+        assert 30 <= len(glimpse.cluster.points) < scene.settings.min_points and not scene.candidates()
+        assert scene.viewing.look_closer(views) == (1, min(views, 1))
+        summary, metrics = scene.summary(), scene.metrics()
+    cube = next(r for r in metrics["objects"] if r["name"] == "cube")
+    if views:
+        assert [o.id for o in scene.candidates()] == [glimpse.id] and len(glimpse.cluster.points) >= 100
+        assert cube["clusters"] == 1 and summary["too_small"] == []
+    else:
+        assert cube["result"] == "missed" and len(scene.views) == 1
+        assert summary["too_small"] == [{"id": glimpse.id, "points": len(glimpse.cluster.points), "views": 1,
+                                         "closer_looks": 0}]
 
 
 def test_a_partial_match_in_one_view_confirms_no_pose(open_world, registry, tmp_path):
