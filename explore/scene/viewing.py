@@ -150,8 +150,8 @@ class ViewTaking:
         glimpsed = [o for o in scene.objects if len(o.cluster.points) < least]
         taken = 0
         for obj in glimpsed:
-            while obj in scene.objects and len(obj.cluster.points) < least and obj.closer_looks < views \
-                    and scene.budget_left > 0:
+            while any(o is obj for o in scene.objects) and len(obj.cluster.points) < least \
+                    and obj.closer_looks < views and scene.budget_left > 0:
                 obj.closer_looks += 1
                 if self.next_view(obj, "closer look") is None:
                     break
