@@ -167,11 +167,11 @@ def test_an_object_seen_with_too_few_points_gets_a_closer_look(open_world, regis
     cube = next(r for r in metrics["objects"] if r["name"] == "cube")
     if views:
         assert [o.id for o in scene.candidates()] == [glimpse.id] and len(glimpse.cluster.points) >= 100
-        assert cube["clusters"] == 1 and summary["too_small"] == []
+        assert cube["clusters"] == 1 and summary["too_small"] == metrics["too_small"] == []
     else:
         assert cube["result"] == "missed" and len(scene.views) == 1
-        assert summary["too_small"] == [{"id": glimpse.id, "points": len(glimpse.cluster.points), "views": 1,
-                                         "closer_looks": 0}]
+        small = {"id": glimpse.id, "points": len(glimpse.cluster.points), "views": 1, "closer_looks": 0}
+        assert summary["too_small"] == [small] and metrics["too_small"] == [{**small, "body": "cube"}]
 
 
 def test_a_partial_match_in_one_view_confirms_no_pose(open_world, registry, tmp_path):

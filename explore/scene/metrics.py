@@ -206,6 +206,9 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
         "added_to_database": summary["added_to_database"],
         "timings_s": summary["timings_s"],
         "objects_found": summary["objects_found"],
+        # objects seen with too few points to be objects, and the body they lie on
+        "too_small": [{**row, "body": _body_of(_true_points(session, session.object(row["id"]).cluster), sim)[0]}
+                      for row in summary["too_small"]],
     }
     if session.registered:
         out["pose_graph"] = pose_graph_errors(session)

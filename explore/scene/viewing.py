@@ -43,6 +43,9 @@ def _displacement(scan: Any, pose: Pose, recorded: Pose) -> float:
     return float(np.linalg.norm(transform_points(pose @ invert(recorded), corners) - corners, axis=1).max())
 
 
+FARTHER = (1.0, 0.75, 0.5, 1.5, 2.0)  # the viewing distance's scales a closer look tries, nearer first
+
+
 class ViewTaking:
     """The viewing step: take, record and correct the views."""
 
@@ -107,12 +110,13 @@ class ViewTaking:
                     break
         return taken
 
-    def next_view(self, obj: SceneObject, purpose: str) -> View | None:
+    def next_view(self, obj: SceneObject, purpose: str, scales: Sequence[float] = (1.0, 0.75, 0.5)) -> View | None:
         """Take the reachable view of ``obj`` farthest (in angle) from the views that saw it.
 
-        A direction the robot cannot reach at the viewing distance is tried nearer (3/4, 1/2 of
-        it, not below the sensor's near limit): an arm reaches a steep view from closer. A view
-        that fails to plan gives way to the next one; ``2 * reach_tries`` directions are tried.
+        A direction the robot cannot reach at the viewing distance is tried at the other
+        ``scales`` of it (by default nearer, 3/4 and 1/2, not below the sensor's near limit: an
+        arm reaches a steep view from closer). A view that fails to plan gives way to the next
+        one; ``2 * reach_tries`` directions are tried.
         """
         scene = self.scene
         centre = obj.cluster.centroid
@@ -120,7 +124,7 @@ class ViewTaking:
         extent = float(np.linalg.norm(hi - lo))
         distance = viewing_distance(scene.sim.sensor, extent)
         near = viewing_distance(scene.sim.sensor, extent, far=0.0)
-        ladder = [d for d in (distance, 0.75 * distance, 0.5 * distance) if d >= near] or [distance]
+        ladder = [scale * distance for scale in scales if scale * distance >= near] or [distance]
         height = scene.sim.robot.camera_height
         rings = [views_around(centre, d, camera_height=height)[0] for d in ladder]
         seen = np.array([scene.views[v].believed[:3, 3] for v in obj.cluster.view_ids])
@@ -144,7 +148,9 @@ class ViewTaking:
         """Views aimed at the objects seen with fewer than ``min_points`` points, up to ``views`` per
         object over the run, segmented as they come, until the object has the points of an object (or
         is merged into another): a small part between others (an upright domino in a grid of objects)
-        may show its narrow side to every patrol view. (glimpsed objects, views taken)."""
+        may show its narrow side to every patrol view. A base that cannot come near (the object in
+        the middle of a table) looks from up to twice the viewing distance. (glimpsed objects, views
+        taken)."""
         scene = self.scene
         least = scene.settings.min_points
         glimpsed = [o for o in scene.objects if len(o.cluster.points) < least]
@@ -153,7 +159,7 @@ class ViewTaking:
             while any(o is obj for o in scene.objects) and len(obj.cluster.points) < least \
                     and obj.closer_looks < views and scene.budget_left > 0:
                 obj.closer_looks += 1
-                if self.next_view(obj, "closer look") is None:
+                if self.next_view(obj, "closer look", FARTHER) is None:
                     break
                 taken += 1
                 scene.segment()
