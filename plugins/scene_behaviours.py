@@ -384,8 +384,9 @@ class LearnObject(ExploreBehaviour):
 
 
 class SettleFromViews(ExploreBehaviour):
-    """Resolve the current ambiguous object with the views already taken (fused per-view poses);
-    one left unknown joins the ``unknown`` list, to be learned."""
+    """Resolve the current ambiguous object with the views already taken (fused per-view poses),
+    and the objects split off it when its model leaves points unexplained; one left unknown joins
+    the ``unknown`` list, to be learned."""
 
     name = "settle_from_views"
     reads = ("scene", "object", "unknown")
@@ -396,11 +397,16 @@ class SettleFromViews(ExploreBehaviour):
         obj = _current(self, "ambiguous")
         if obj is None:
             return success("nothing ambiguous")
-        status = _scene(self).recognition.settle_from_views(obj)
-        if status == "unknown":
-            self.write("unknown", [*(self.read("unknown") or []), obj.id])
+        scene = _scene(self)
+        before = {o.id for o in scene.objects}
+        settled = {obj.id: scene.recognition.settle_from_views(obj)}
+        while split := [o for o in scene.candidates() if o.id not in before and o.id not in settled]:
+            settled[split[0].id] = scene.recognition.settle_split_off(split[0])
+        unknown = [i for i, status in settled.items() if status == "unknown"]
+        if unknown:
+            self.write("unknown", [*(self.read("unknown") or []), *unknown])
         self.context.status_line = _status(self)
-        return success(f"object {obj.id}: {status}")
+        return success(", ".join(f"object {i}: {status}" for i, status in settled.items()))
 
 
 class CheckExplained(ExploreBehaviour):

@@ -174,6 +174,25 @@ def test_an_object_seen_with_too_few_points_gets_a_closer_look(open_world, regis
         assert summary["too_small"] == [small] and metrics["too_small"] == [{**small, "body": "cube"}]
 
 
+def test_an_object_split_off_while_settling_is_settled_too(open_world, registry, tmp_path):
+    """The duck and the block touching it, settled as an ambiguous object from the one view taken: the
+    duck is recognised and its 420 unexplained points split off; that new object (which no later
+    recognition of the patrol's table would see) is recognised, validated and settled as unknown."""
+    with open_world(_world(tmp_path, TOUCHING)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+        db.seed_from_world(sim)
+        scene = SceneSession(sim, registry, db)
+        scene.viewing.overview()
+        (duck,) = scene.segment()
+        scene.recognition.recognise(duck)
+        duck.status = "ambiguous"
+        assert scene.recognition.settle_from_views(duck) == "recognised" and duck.model == "duck"
+        (block,) = [o for o in scene.candidates() if o is not duck]
+        assert block.status == "unexplained" and len(block.cluster.points) >= scene.settings.min_points
+        assert scene.recognition.settle_split_off(block) == "unknown" == block.status
+        metrics = scene.metrics()
+    assert next(r for r in metrics["objects"] if r["name"] == "block")["clusters"] == 1
+
+
 def test_a_partial_match_in_one_view_confirms_no_pose(open_world, registry, tmp_path):
     """The duck and the block touching it, before the split: each view's points fit the duck's
     rendering (a partial match, which the merged path accepts and splits) but do not explain the

@@ -287,6 +287,13 @@ class Recognition:
         self._settle_ambiguous(obj)
         return obj.status
 
+    def settle_split_off(self, obj: SceneObject) -> str:
+        """Recognise, validate and settle with the views taken an object split off another while it was
+        settled (the patrol's last recognition of that table has passed); its status."""
+        self.recognise(obj)
+        self.validate(obj)
+        return self.settle_from_views(obj)
+
     def multi_view_step(self, obj: SceneObject) -> bool:
         """One more view of an ambiguous object; True when it is resolved or out of views."""
         scene = self.scene
