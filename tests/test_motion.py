@@ -281,8 +281,10 @@ def test_the_work_clock_makes_a_plan_independent_of_the_cpu_load(workcell, endpo
 
 def test_a_work_budget_without_work_still_ends_by_the_wall_guard() -> None:
     """A planner that charges nothing cannot hang a run: the budget ends after
-    WALL_FACTOR x limit + 1 s of wall time."""
-    from explore.motion import WALL_FACTOR, Budget, work_clock
+    WALL_FACTOR x limit + 1 s of wall time, and the run counts that wall time decided once
+    (metrics.json's ``wall_guard_stops``); a budget ended by its work is not counted."""
+    from explore.motion import WALL_FACTOR, Budget, wall_guard_stops, work_clock
+    from explore.motion.planning_clock import charge
 
     with work_clock():
         budget = Budget(0.02)
@@ -290,7 +292,14 @@ def test_a_work_budget_without_work_still_ends_by_the_wall_guard() -> None:
         while not budget.expired():
             time.sleep(0.01)
         waited = time.perf_counter() - t0
+        assert budget.expired() and wall_guard_stops() == 1
+        worked = Budget(0.02)
+        while not worked.expired():
+            charge("planar")
+        assert wall_guard_stops() == 1
     assert WALL_FACTOR * 0.02 + 1.0 <= waited + 0.011 < WALL_FACTOR * 0.02 + 1.5
+    with work_clock():
+        assert wall_guard_stops() == 0  # each run counts its own
 
 
 def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(open_world) -> None:

@@ -32,7 +32,7 @@ from explore.motion.kinodynamic import control_planner_names, plan_kinodynamic
 from explore.motion.mobile import PlanarChecker, box_distance, plan_mobile
 from explore.motion.noise import truncated_normal, truncated_normal_logpdf
 from explore.motion.planner import MotionPlanner
-from explore.motion.planning_clock import COSTS, WALL_FACTOR, Budget, work_clock
+from explore.motion.planning_clock import COSTS, WALL_FACTOR, Budget, wall_guard_stops, work_clock
 from explore.motion.problem import BodyFreeSpace, MotionProblem, path_is_valid, path_length, validate_path
 from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Capability, Robot
@@ -89,5 +89,6 @@ __all__ = [
     "truncated_normal",
     "truncated_normal_logpdf",
     "validate_path",
+    "wall_guard_stops",
     "work_clock",
 ]

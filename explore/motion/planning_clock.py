@@ -29,6 +29,7 @@ WALL_FACTOR = 10.0  # the hang guard: a budget also ends after this many times i
 
 _work: float | None = None  # None: the wall clock
 counts: dict[str, int] = dict.fromkeys(COSTS, 0)  # units charged inside work_clock (for calibration)
+wall_stops = 0  # budgets the hang guard ended since work_clock began: wall time decided, a rerun may differ
 
 
 def now() -> float:
@@ -47,13 +48,18 @@ def charge(kind: str, count: int = 1) -> None:
 @contextmanager
 def work_clock() -> Iterator[None]:
     """Measure planning budgets in work done (starting at 0) until the block ends."""
-    global _work
+    global _work, wall_stops
     previous = _work
-    _work = 0.0
+    _work, wall_stops = 0.0, 0
     try:
         yield
     finally:
         _work = previous
+
+
+def wall_guard_stops() -> int:
+    """Budgets the hang guard ended since :func:`work_clock` began (each one let wall time decide)."""
+    return wall_stops
 
 
 class Budget:
@@ -63,12 +69,21 @@ class Budget:
         self.limit = max(0.0, float(limit))
         self.deadline = now() + self.limit
         self.wall_deadline = time.perf_counter() + WALL_FACTOR * self.limit + 1.0
+        self._guard_stopped = False
 
     def remaining(self) -> float:
         return self.deadline - now()
 
     def expired(self) -> bool:
-        return now() >= self.deadline or (_work is not None and time.perf_counter() >= self.wall_deadline)
+        global wall_stops
+        if now() >= self.deadline:
+            return True
+        if _work is None or time.perf_counter() < self.wall_deadline:
+            return False
+        if not self._guard_stopped:  # the hang guard decides: counted once per budget
+            self._guard_stopped = True
+            wall_stops += 1
+        return True
 
     def share(self, fraction: float) -> Budget:
         """A budget of ``fraction`` of the remaining time (ending no later than this one)."""

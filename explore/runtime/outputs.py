@@ -18,6 +18,7 @@ import numpy as np
 
 from explore.core import save_curves_png
 from explore.mapping import GroundTruthMetrics
+from explore.motion import wall_guard_stops
 from explore.runtime.context import RunContext
 from explore.runtime.run_inputs import METRICS_SCHEMA_VERSION, write_json_atomic
 
@@ -107,6 +108,8 @@ def write_outputs(context: RunContext, tree_file: Any, root: Any, status: str, r
         "planner": config.planner,
         "seed": config.seed,
         "planning_clock": config.planning_clock,
+        # plans the work clock's hang guard cut (wall time decided them: the run may not repeat)
+        "wall_guard_stops": wall_guard_stops() if config.planning_clock == "work" else None,
         "settings": config.settings,
         "status": status,
         "reason": reason,
