@@ -401,7 +401,7 @@ class SettleFromViews(ExploreBehaviour):
         before = {o.id for o in scene.objects}
         settled = {obj.id: scene.recognition.settle_from_views(obj)}
         while split := [o for o in scene.candidates() if o.id not in before and o.id not in settled]:
-            settled[split[0].id] = scene.recognition.settle_split_off(split[0])
+            settled[split[0].id] = scene.recognition.settle_from_views(split[0])
         unknown = [i for i, status in settled.items() if status == "unknown"]
         if unknown:
             self.write("unknown", [*(self.read("unknown") or []), *unknown])

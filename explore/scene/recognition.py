@@ -119,7 +119,10 @@ class Recognition:
         if obj.rivals:
             obj.status = AMBIGUOUS
             return obj.status
-        if self._split_residual(obj) is not None:  # the rest was another object: recognise what is left
+        rest = self._split_residual(obj)
+        if rest is not None:  # the rest is another object: recognise it and what is left
+            self.recognise(rest)
+            self.validate(rest)
             self.recognise(obj)
             return self.validate(obj)
         self.collect_view_hypotheses(obj)
@@ -286,13 +289,6 @@ class Recognition:
         self.validate(obj)
         self._settle_ambiguous(obj)
         return obj.status
-
-    def settle_split_off(self, obj: SceneObject) -> str:
-        """Recognise, validate and settle with the views taken an object split off another while it was
-        settled (the patrol's last recognition of that table has passed); its status."""
-        self.recognise(obj)
-        self.validate(obj)
-        return self.settle_from_views(obj)
 
     def multi_view_step(self, obj: SceneObject) -> bool:
         """One more view of an ambiguous object; True when it is resolved or out of views."""
