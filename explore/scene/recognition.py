@@ -125,6 +125,12 @@ class Recognition:
             self.validate(rest)
             self.recognise(obj)
             return self.validate(obj)
+        if not reaches(best.q_h, min_q_h):  # a partial match that splits nothing off explains too little
+            obj.rejected.insert(0, {"model": best.model, "q_h": best.q_h, "by": "partial",
+                                    "margin": best.q_h - min_q_h})
+            obj.status, obj.model, obj.pose, obj.rivals = UNKNOWN, None, None, []
+            self._recognise_from_views(obj)
+            return obj.status
         self.collect_view_hypotheses(obj)
         self.fuse(obj)
         if self._fusion_agrees(obj):
