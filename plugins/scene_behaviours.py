@@ -256,8 +256,8 @@ class LookCloser(ExploreBehaviour):
         scene = _scene(self)
         glimpsed, views = scene.viewing.look_closer(self.p["views"])
         self.context.status_line = _status(self)
-        small = sum(len(o.cluster.points) < scene.settings.min_points for o in scene.objects)
-        return success(f"{glimpsed} seen with too few points, {views} views aimed at them, {small} left too small")
+        return success(f"{glimpsed} seen with too few points, {views} views aimed at them, "
+                       f"{len(scene.too_small())} left too small")
 
 
 class RecogniseObjects(ExploreBehaviour):

@@ -146,10 +146,10 @@ class SparsePVS(PVS):
             coords, peak = S.block_peaks(self._store)
             coords = coords[peak >= np.float32(logit(p) - 1e-3)]
             first = coords.min(axis=0) if len(coords) else np.zeros(3, np.int64)
-            size = coords.max(axis=0) - first + 1 if len(coords) else np.zeros(3, np.int64)
+            size = tuple(int(v) for v in coords.max(axis=0) - first + 1) if len(coords) else (0, 0, 0)
             marked = None
-            if math.prod(int(v) for v in size) <= MARKED_MAX_BLOCKS:
-                grid = np.zeros(tuple(int(v) for v in size), np.bool_)
+            if math.prod(size) <= MARKED_MAX_BLOCKS:
+                grid = np.zeros(size, np.bool_)
                 grid[tuple((coords - first).T)] = True
                 marked = (grid, first)
             self._cache[key] = cached = (self.version, marked)

@@ -176,6 +176,10 @@ class SceneSession:
         """The objects large enough to be explained (smaller clusters are noise)."""
         return [o for o in self.objects if len(o.cluster.points) >= self.settings.min_points]
 
+    def too_small(self) -> list[SceneObject]:
+        """The other objects: seen with too few points to be explained (noise unless a closer look adds more)."""
+        return [o for o in self.objects if len(o.cluster.points) < self.settings.min_points]
+
     def _near_share(self, cluster: Cluster, obj: SceneObject) -> np.ndarray:
         from scipy.spatial import cKDTree
 
@@ -269,7 +273,7 @@ class SceneSession:
             ],
             "too_small": [{"id": o.id, "points": int(len(o.cluster.points)), "views": len(o.cluster.view_ids),
                            "closer_looks": o.closer_looks}
-                          for o in self.objects if len(o.cluster.points) < self.settings.min_points],
+                          for o in self.too_small()],
         }
 
     def metrics(self) -> dict[str, Any]:

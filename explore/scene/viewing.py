@@ -152,12 +152,10 @@ class ViewTaking:
         the middle of a table) looks from up to twice the viewing distance. (glimpsed objects, views
         taken)."""
         scene = self.scene
-        least = scene.settings.min_points
-        glimpsed = [o for o in scene.objects if len(o.cluster.points) < least]
+        glimpsed = scene.too_small()
         taken = 0
         for obj in glimpsed:
-            while any(o is obj for o in scene.objects) and len(obj.cluster.points) < least \
-                    and obj.closer_looks < views and scene.budget_left > 0:
+            while any(o is obj for o in scene.too_small()) and obj.closer_looks < views and scene.budget_left > 0:
                 obj.closer_looks += 1
                 if self.next_view(obj, "closer look", FARTHER) is None:
                     break
