@@ -163,6 +163,8 @@ class StartScene(ExploreBehaviour):
               low=0.0, high=1.0),
         Param("retry_scans", int, 3, "", "re-try recognition during the first modelling scans", low=0),
         Param("multi_view_views", int, 10, "", "view budget per ambiguous object", low=0),
+        Param("view_render_fit", float, 0.8, "", "share of the model's rendered beams one view must confirm "
+              "(N_m/N_r) to confirm a pose in multi-view recognition", low=0.0, high=1.0),
         Param("register", bool, True, "", "pose graph + re-integration after each view (noisy mobile base without "
               "a localisation laser)"),
         Param("noise", bool, True, "", "execute motions with the robot's positioning noise"),
@@ -191,7 +193,8 @@ class StartScene(ExploreBehaviour):
                 seed=config.seed, resolution=p["resolution"] or None, pvs_layout=p["pvs_layout"],
                 max_views=config.max_scans or p["max_views"], model_scans=p["model_scans"],
                 model_coverage=p["model_coverage"], retry_scans=p["retry_scans"],
-                multi_view_views=p["multi_view_views"], noise=p["noise"], planner=config.planner,
+                multi_view_views=p["multi_view_views"], view_render_fit=p["view_render_fit"], noise=p["noise"],
+                planner=config.planner,
                 run_name=ctx.out_dir.name, register=p["register"], flying_pixel_filter=p["flying_pixel_filter"],
                 median_px=p["median_px"], organised_normals=p["organised_normals"],
             )
@@ -307,11 +310,15 @@ class ValidateObjects(ExploreBehaviour):
 
 
 class MultiViewStep(ExploreBehaviour):
-    """One more view of the current ambiguous object; per-view hypotheses fused on SE(3) (Sec. 5.6.2)."""
+    """One more view of the current ambiguous object; per-view hypotheses fused on SE(3) (Sec. 5.6.2).
+
+    An object the views leave unknown joins the ``unknown`` list, to be modelled in the same round
+    (the next round would find it ambiguous again, with its view budget spent, and go round in
+    circles until the rounds run out)."""
 
     name = "multi_view_step"
-    reads = ("scene", "object")
-    writes = ("object_done",)
+    reads = ("scene", "object", "unknown")
+    writes = ("object_done", "unknown")
     blocking = True
 
     def work(self) -> Outcome:
@@ -321,6 +328,8 @@ class MultiViewStep(ExploreBehaviour):
             return success("nothing ambiguous")
         done = _scene(self).recognition.multi_view_step(obj)
         self.write("object_done", done)
+        if obj.status == "unknown" and obj.id not in (unknown := self.read("unknown") or []):
+            self.write("unknown", [*unknown, obj.id])
         self.context.status_line = _status(self)
         self.context.trace("decision", what="multi_view", object=obj.id, status=obj.status, views=obj.multi_views)
         return success(f"object {obj.id}: {obj.status}")

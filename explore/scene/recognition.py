@@ -226,8 +226,9 @@ class Recognition:
 
     # -- multi-view recognition (Kriegel Sec. 5.6.2) ---------------------------------------------
     def view_hypothesis(self, obj: SceneObject, view: int, names: Sequence[str] | None = None) -> Hypothesis | None:
-        """Recognise the object from the points of one view only; validated and explaining the view's
-        points (q_h at the threshold), or None."""
+        """Recognise the object from the points of one view only: validated, explaining the view's points
+        (q_h at the threshold) and confirmed by them where the model is (``settings.view_render_fit``),
+        or None."""
         scene = self.scene
         part = obj.cluster.only_view(view)
         if len(part.points) < 10:
@@ -235,10 +236,11 @@ class Recognition:
         models = [m for m in scene.models if names is None or m.name in names]
         hypotheses = scene.recognizer.recognize(part, models, {view: scene.views[view].scan})
         for h in scene.recognizer.accept(hypotheses):
-            if not reaches(h.q_h, self.min_q_h):
+            if not reaches(h.q_h, self.min_q_h) or not reaches(h.render_fit, scene.settings.view_render_fit):
                 # a partial match (accepted() for touching objects; the merged path splits the rest
                 # off) confirms no pose: agreeing partial matches let a small model learned earlier
-                # claim a larger object (room40: a jenga block at q_h 0.13-0.22)
+                # claim a larger object (room40: a jenga block at q_h 0.13-0.22); nor does a model
+                # with surface where the view saw none (see SceneSettings.view_render_fit)
                 continue
             checked = self._validate_one(h)
             if checked.diagnostics["v_accepted"]:
