@@ -255,6 +255,23 @@ def test_a_similar_model_with_surface_where_a_view_saw_none_confirms_no_pose(ope
             assert obj.model != "part" or obj.status != "recognised"
 
 
+@pytest.mark.slow
+def test_an_object_left_unknown_by_multi_view_recognition_is_modelled_in_the_same_round(registry, tmp_path):
+    """No view may confirm a pose (``view_render_fit`` 1) and there is no view budget for ambiguous
+    objects: the duck and the mug, recognised from the merged views, stay ambiguous and are settled
+    unknown; they are modelled in that round like the sorter, and the run explains every object (it
+    used to find them ambiguous again in every round until the rounds ran out, and fail)."""
+    from explore.runtime import RunConfig, execute
+
+    config = RunConfig(tree="scene_exploration", world="scene_small", out=tmp_path / "run",
+                       settings={"start_scene.db": str(tmp_path / "o.db"), "start_scene.multi_view_views": "0",
+                                 "start_scene.view_render_fit": "1.0", "start_scene.model_scans": "2"})
+    result = execute(config, registry)
+    assert result.status == "success"
+    results = {r["name"]: r["result"] for r in result.metrics["objects"]}
+    assert results == {"duck": "modelled", "mug": "modelled", "sorter": "modelled"}
+
+
 def test_empty_scene_is_explained_with_no_objects(registry, tmp_path):
     from explore.runtime import RunConfig, execute
 
