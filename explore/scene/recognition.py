@@ -342,13 +342,17 @@ class Recognition:
 
     def _settle_ambiguous(self, obj: SceneObject) -> None:
         """Out of views (none reachable, or the patrol's views all used): keep the fused pose if enough
-        views agree, or if the validated hypothesis has no rival although no second view confirms it
-        (Kriegel's single-view recognition: q_h and the PVS votes passed); else the object is unknown."""
+        views agree, or if the validated hypothesis has no rival and its one view is the only one
+        checked (Kriegel's single-view recognition: q_h and the PVS votes passed); else the object is
+        unknown. One confirming view among several that do not is no recognition: a flat jenga block
+        was taken for a similar part's model from one view after 10 more views confirmed nothing
+        (``tabletop_similar``, seed 1)."""
         scene = self.scene
         if obj.status != AMBIGUOUS:
             return
         agreed = obj.fused is not None and len(obj.fused.members) >= scene.settings.multi_view_agree
-        unconfirmed = obj.fused is not None and not obj.rivals
+        checked = sum(1 for _, name in obj.checked_views if name == obj.model)
+        unconfirmed = obj.fused is not None and not obj.rivals and checked <= len(obj.fused.members)
         if agreed or unconfirmed:
             obj.pose = self.refined(obj, obj.fused.pose)
             obj.status = RECOGNISED
