@@ -229,8 +229,8 @@ objects:
 def test_a_similar_model_with_surface_where_a_view_saw_none_confirms_no_pose(open_world, registry, tmp_path):
     """A flat jenga block and a database holding a random part as long as it: views of the block fit
     the part at q_h >= 0.5, the merged views' threshold, and such views agreed on a pose often enough
-    to recognise the block as the part (``tabletop_similar``, three seeds of three, with the part's model
-    learned in the same run). The part's rendered surface is confirmed by under 80 % of a view's
+    to recognise the block as the part (the objects of ``tabletop_similar``: three seeds of three, with
+    the part's model learned in the same run). The part's rendered surface is confirmed by under 80 % of a view's
     beams there, so no view confirms it (``view_render_fit``); the right model's views reach 0.76-0.99."""
     with ObjectDatabase.open(tmp_path / "o.db") as db:
         with open_world(_world(tmp_path, KNOWN_PART)) as sim:
