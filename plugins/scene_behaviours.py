@@ -131,6 +131,15 @@ def _scene(behaviour: ExploreBehaviour) -> Any:
     return behaviour.read("scene").session
 
 
+def _to_model(behaviour: ExploreBehaviour, ids: list[int]) -> None:
+    """Add objects left unknown after validation to the round's ``unknown`` list (modelled or learned
+    in this round; the list is written once, by ``validate_objects``)."""
+    listed = behaviour.read("unknown") or []
+    new = [i for i in ids if i not in listed]
+    if new:
+        behaviour.write("unknown", [*listed, *new])
+
+
 def _current(behaviour: ExploreBehaviour, *statuses: str) -> Any:
     """The object named by the ``object`` key if it still has one of ``statuses``, else None."""
     scene = _scene(behaviour)
@@ -328,8 +337,8 @@ class MultiViewStep(ExploreBehaviour):
             return success("nothing ambiguous")
         done = _scene(self).recognition.multi_view_step(obj)
         self.write("object_done", done)
-        if obj.status == "unknown" and obj.id not in (unknown := self.read("unknown") or []):
-            self.write("unknown", [*unknown, obj.id])
+        if obj.status == "unknown":
+            _to_model(self, [obj.id])
         self.context.status_line = _status(self)
         self.context.trace("decision", what="multi_view", object=obj.id, status=obj.status, views=obj.multi_views)
         return success(f"object {obj.id}: {obj.status}")
@@ -411,9 +420,7 @@ class SettleFromViews(ExploreBehaviour):
         settled = {obj.id: scene.recognition.settle_from_views(obj)}
         while split := [o for o in scene.candidates() if o.id not in before and o.id not in settled]:
             settled[split[0].id] = scene.recognition.settle_from_views(split[0])
-        unknown = [i for i, status in settled.items() if status == "unknown"]
-        if unknown:
-            self.write("unknown", [*(self.read("unknown") or []), *unknown])
+        _to_model(self, [i for i, status in settled.items() if status == "unknown"])
         self.context.status_line = _status(self)
         return success(", ".join(f"object {i}: {status}" for i, status in settled.items()))
 
