@@ -30,20 +30,26 @@ class SceneRun:
 
     @property
     def end_outcome(self) -> str:
-        """SUCCESS unless a patrolled table got no view: NO_CANDIDATES when none of its observation
-        poses could be reached, BUDGET when the view budget ran out first. The objects of a table
-        never looked at are not explained, however well the others went."""
-        unreached, unseen = self._unseen_tables()
-        return NO_CANDIDATES if unreached else BUDGET if unseen else SUCCESS
+        """SUCCESS only when the mission's goal was met (see :meth:`shortfall`)."""
+        return self.shortfall()[0]
 
     @property
     def end_reason(self) -> str:
+        return self.shortfall()[1]
+
+    def shortfall(self) -> tuple[str, str]:
+        """(outcome, reason): NO_CANDIDATES when none of a patrolled table's observation poses could be
+        reached, BUDGET when the view budget ran out before a table got a view (its objects are not
+        explained, however well the others went), then the session's own shortfall
+        (:meth:`~explore.scene.SceneSession.shortfall`); (SUCCESS, "") when the goal was met."""
         unreached, unseen = self._unseen_tables()
         if unreached:
-            return f"no observation pose around {', '.join(unreached)} could be reached"
+            return NO_CANDIDATES, f"no observation pose around {', '.join(unreached)} could be reached"
         if unseen:
-            return f"view budget of {self.session.settings.max_views} used up before {', '.join(unseen)} got a view"
-        return ""
+            max_views = self.session.settings.max_views
+            return BUDGET, f"view budget of {max_views} used up before {', '.join(unseen)} got a view"
+        outcome, reason = self.session.shortfall()
+        return (outcome, reason) if outcome else (SUCCESS, "")
 
     def _unseen_tables(self) -> tuple[list[str], list[str]]:
         """(tables whose poses were all unreachable, tables the view budget left unseen)."""
@@ -435,8 +441,7 @@ class CheckExplained(ExploreBehaviour):
     def work(self) -> Outcome:
         scene = _scene(self)
         explained = scene.all_explained
-        open_objects = scene.by_status("unexplained", "unknown", "ambiguous")
-        done = explained or scene.budget_left <= 0 or not open_objects
+        done = explained or scene.budget_left <= 0 or not scene.open_objects()
         self.write("explained", explained)
         self.write("done", done)
         found = scene.candidates()

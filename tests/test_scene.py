@@ -600,3 +600,31 @@ def test_a_patrol_that_reaches_no_pose_around_a_table_says_so(registry, tmp_path
     assert result.metrics["patrol"]["tables"] == [{"table": "table", "views": 0, "unreachable": True}]
     assert result.status == "no_candidates" and "no observation pose around table could be reached" in result.reason, \
         (result.status, result.reason)
+
+
+FENCED_FAR = FENCED.replace("name: fenced", "name: fenced_far").replace("base: [0.0, -2.3, 0.0, 90.0]", """\
+base: [0.0, -1.9, 0.0, 90.0]}
+overview: {eye: [0.0, -1.9, 1.3], target: [0.0, 0.0, 0.65]""")
+DUCK = "size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.12]"
+
+
+@pytest.mark.parametrize("duck, camera, result, reason", [
+    (DUCK, "160, height: 120", "missed", "object(s) 0 (37 points) seen with too few points to tell from noise"),
+    (DUCK, "320, height: 240", "unknown", "object(s) 0 left unknown: no view to model it could be reached"),
+    (DUCK.replace("0.10", "0.16").replace("-0.12", "-0.15"), "320, height: 240", "modelled",
+     "object(s) 0 (ĉ_m 0.57, 0 scans) modelled below the coverage target 0.75: no reachable view was left"),
+], ids=["glimpsed", "no_mesh", "one_view_model"])
+def test_an_object_no_view_of_which_can_be_reached_ends_the_run_no_candidates(registry, tmp_path, duck, camera,
+                                                                               result, reason):
+    """The fenced table seen from just beyond the ring, where every closer view lies inside the ring: the
+    overview alone sees the duck. With few pixels it is a glimpse too small to tell from noise; with
+    more it is an unknown object one view cannot mesh; larger, it is meshed from that view alone. The
+    run ends no_candidates naming the object in each case, not success (nor failure after eight
+    useless rounds)."""
+    from explore.runtime import RunConfig, execute
+
+    world = FENCED_FAR.replace(DUCK, duck).replace("160, height: 120", camera)
+    run = execute(RunConfig(tree="scene_exploration", world=_world(tmp_path, world), seed=0, out=tmp_path / "run",
+                            settings={"start_scene.db": str(tmp_path / "objects.db")}), registry)
+    assert run.metrics["views"] == 1 and run.metrics["objects"][0]["result"] == result, run.metrics["objects"]
+    assert run.status == "no_candidates" and run.reason.startswith(reason), (run.status, run.reason)

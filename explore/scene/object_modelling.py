@@ -10,17 +10,24 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import Array
+from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Array
 from explore.scene.motion import target_start
 from explore.scene.scene_objects import (
     AMBIGUOUS,
     MODELLED,
     MODELLING,
+    NO_PROGRESS,
+    NO_VIEW,
     RECOGNISED,
+    RECOGNISED_INSTEAD,
+    SCAN_BUDGET,
+    TARGET,
     UNKNOWN,
+    VIEW_BUDGET,
     SceneObject,
     close_holes,
 )
+from explore.scene.viewing import BEYOND
 
 if TYPE_CHECKING:
     from explore.scene.session import SceneSession
@@ -50,7 +57,7 @@ class ObjectModelling:
                                    max_scans=scene.settings.model_scans + seen, region=(lo, hi), obstacles=others,
                                    fallback_generator=None, standoff=0.0)  # as the scene's views
         scene.modelling_sessions[obj.id] = session
-        obj.status = MODELLING
+        obj.status, obj.modelling_end = MODELLING, ""
         obj.note(f"modelling in box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}")
         for index in obj.cluster.view_ids:  # what the scene already saw of it
             session.integrate_view(scene.views[index].scan, scene.views[index].believed, "scene")
@@ -79,8 +86,14 @@ class ObjectModelling:
         own_scans = obj.modelling_scans
         if own_scans > 0:
             decision = session.terminate()
-            if decision.stop or own_scans >= scene.settings.model_scans:
-                obj.note(f"modelling stopped: {decision.reason or 'scan budget'}")
+            if decision.stop:
+                obj.modelling_end = {SUCCESS: TARGET, BUDGET: SCAN_BUDGET, NO_CANDIDATES: NO_PROGRESS}.get(
+                    decision.outcome, NO_PROGRESS)
+                obj.note(f"modelling stopped: {decision.reason}")
+                return True
+            if own_scans >= scene.settings.model_scans:
+                obj.modelling_end = SCAN_BUDGET
+                obj.note(f"modelling stopped: scan budget of {own_scans} used ({decision.reason})")
                 return True
         session.generate()
         target, configs, candidate = None, None, None
@@ -101,11 +114,14 @@ class ObjectModelling:
         view = None
         if target is not None:
             view = scene.viewing.add_view(target, f"model {obj.id}", obj.id, configs)
-        if view is None:  # no reachable NBS candidate: the most novel reachable view of the object
-            candidate = None
-            view = scene.viewing.next_view(obj, f"model {obj.id}")
+        if view is None:  # no reachable NBS candidate: the most novel reachable view of the object, from farther
+            candidate = None  # only when no direction is reachable near (a base kept away by the table)
+            view = scene.viewing.next_view(obj, f"model {obj.id}") or \
+                scene.viewing.next_view(obj, f"model {obj.id}", BEYOND)
         if view is None:
-            obj.note("modelling stopped: no reachable view left")
+            obj.modelling_end = NO_VIEW
+            history = session.ctx.coverage_history
+            obj.note(f"modelling stopped: no reachable view left (ĉ_m = {history[-1] if history else 0.0:.3f})")
             return True
         obj.modelling_scans += 1
         session.integrate_view(view.scan, view.believed, None if candidate is not None else "scene_view")
@@ -116,11 +132,14 @@ class ObjectModelling:
         if obj.modelling_scans <= scene.settings.retry_scans and scene.models:
             scene.recognition.recognise(obj)
             if scene.recognition.validate(obj) in (RECOGNISED, AMBIGUOUS):
+                obj.modelling_end = RECOGNISED_INSTEAD
                 obj.note(f"recognised as {obj.model} during modelling (scan {obj.modelling_scans})")
                 scene.modelling_sessions.pop(obj.id, None)
                 return True
             obj.status = MODELLING
         if scene.budget_left <= 0:
+            obj.modelling_end = VIEW_BUDGET
+            obj.note(f"modelling stopped: the scene's view budget of {scene.settings.max_views} is used up")
             return True
         return False
 

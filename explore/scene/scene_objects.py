@@ -26,6 +26,12 @@ UNEXPLAINED, RECOGNISED, AMBIGUOUS, UNKNOWN, MODELLING, MODELLED = (
 
 EXPLAINED = (RECOGNISED, MODELLED)
 
+# why an object's modelling stopped: the termination rule's target, its per-object scan budget (Kriegel's
+# n_abort), the rule saw no progress left, no reachable view was left, the scene's view budget ran out, or
+# a modelling scan showed a known object after all
+TARGET, SCAN_BUDGET, NO_PROGRESS, NO_VIEW, VIEW_BUDGET, RECOGNISED_INSTEAD = (
+    "target", "scan_budget", "no_progress", "no_view", "view_budget", "recognised")
+
 
 FLOOR = (0.0, 0.0, 1.0, 0.0)  # the plane robot bases drive on (world z = 0)
 
@@ -71,7 +77,9 @@ class SceneObject:
     fused: FusedPose | None = None
     multi_views: int = 0
     modelling_scans: int = 0
+    modelling_end: str = ""  # why its modelling stopped (TARGET, SCAN_BUDGET, ...; "" before)
     closer_looks: int = 0
+    closer_look_unreached: bool = False  # a closer look was wanted and no view of it could be reached
     coverage_estimate: float = math.nan
     surface_points: Points3 | None = None
     recognised_after_views: int | None = None

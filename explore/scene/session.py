@@ -14,18 +14,21 @@ Kriegel thesis Fig. 3.1 (Sec. 3.1, 3.4, 5.6) with Görner's tabletop segmentatio
         result = scene.run()                      # or call the steps one by one
         print(result["all_explained"], [o["result"] for o in result["objects"]])
 
-The steps, each a method a behaviour can call: :meth:`SceneSession.overview` (first views,
-PVS initialisation), :meth:`~SceneSession.segment` (support plane, clusters of every new
-view, associated to the scene's objects), :meth:`~SceneSession.recognise` (each cluster
-against the database; a hypothesis needs q_h >= the recogniser's ``min_q_h``, Eq. 3.10),
-:meth:`~SceneSession.validate` (PVS votes, Eq. 3.11; competing hypotheses make the object
-*ambiguous*), :meth:`~SceneSession.multi_view_step` (one more view of an ambiguous object;
-per-view hypotheses fused on SE(3), Sec. 5.6.2), :meth:`~SceneSession.model_step` (one NBS
+The steps, each a method a behaviour can call on one of the session's collaborators:
+``scene.viewing.overview()`` (first views, PVS initialisation), :meth:`SceneSession.segment`
+(support plane, clusters of every new view, associated to the scene's objects),
+``scene.recognition.recognise(obj)`` (each cluster against the database; a hypothesis needs
+q_h >= the recogniser's ``min_q_h``, Eq. 3.10), ``scene.recognition.validate(obj)`` (PVS votes,
+Eq. 3.11; competing hypotheses make the object *ambiguous*),
+``scene.recognition.multi_view_step(obj)`` (one more view of an ambiguous object; per-view
+hypotheses fused on SE(3), Sec. 5.6.2), ``scene.object_modelling.model_step(obj)`` (one NBS
 iteration of :class:`~explore.nbv.modelling.ModellingSession` restricted to the object's box,
 the other objects as obstacles, recognition re-tried during the first scans) and
-:meth:`~SceneSession.add_to_database` (mesh, PPF/VFH descriptors, provenance, location:
-iterative recognition). :meth:`~SceneSession.correct_poses` runs the gtsam pose graph over
-the views and re-integrates the PVS and the clusters at the corrected poses.
+``scene.database_update.add_to_database`` (mesh, PPF/VFH descriptors, provenance, location:
+iterative recognition). ``scene.viewing.correct_poses()`` runs the gtsam pose graph over the
+views and re-integrates the PVS and the clusters at the corrected poses.
+:meth:`SceneSession.shortfall` says why a run that ends with every object explained may still
+have missed its goal (no reachable view, the view budget).
 
 The session never reads the ground truth; :meth:`SceneSession.metrics` does, through
 :mod:`explore.scene.metrics`.
@@ -40,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Points3
+from explore.core import BUDGET, NO_CANDIDATES, Points3
 from explore.perception import Cluster, Model, Table, require_role
 from explore.scene.database_update import DatabaseUpdate
 from explore.scene.motion import Mover
@@ -49,9 +52,13 @@ from explore.scene.recognition import Recognition
 from explore.scene.scene_objects import (
     AMBIGUOUS,
     FLOOR,
+    MODELLED,
     MODELLING,
+    NO_PROGRESS,
+    NO_VIEW,
     UNEXPLAINED,
     UNKNOWN,
+    VIEW_BUDGET,
     SceneObject,
     View,
     _plugin,
@@ -154,6 +161,46 @@ class SceneSession:
     def budget_left(self) -> int:
         return self.settings.max_views - len(self.views)
 
+    def open_objects(self) -> list[SceneObject]:
+        """The objects still to explain that another round could explain: not those left unknown because
+        no view to model them could be reached (tried again only while other objects bring new views)."""
+        pending = self.by_status(UNEXPLAINED, UNKNOWN, AMBIGUOUS)
+        return pending if any(o.modelling_end != NO_VIEW for o in pending) else []
+
+    def shortfall(self) -> tuple[str, str]:
+        """(outcome, reason) when the session could not do what its goal needs for want of a reachable
+        view (``no_candidates``: an object modelled below the coverage target, or one glimpsed with too
+        few points to tell from noise that no closer view could reach) or of the scene's views
+        (``budget_exhausted``: modelled below the target, or objects left unexplained); ("", "")
+        otherwise. The per-object scan budget is Kriegel's n_abort, the thesis' own end of an object's
+        NBS loop, and counts as done."""
+        target = self.settings.model_coverage
+
+        def listed(objects: list[SceneObject]) -> str:
+            return ", ".join(f"{o.id} (ĉ_m {o.coverage_estimate:.2f}, {o.modelling_scans} scans)" for o in objects)
+
+        modelled = self.by_status(MODELLED)
+        unreached = [o for o in modelled if o.modelling_end in (NO_VIEW, NO_PROGRESS)
+                     and not o.coverage_estimate >= target]
+        stuck = [o for o in self.by_status(UNKNOWN) if o.modelling_end == NO_VIEW]
+        glimpsed = [o for o in self.too_small() if o.closer_look_unreached]
+        why = [f"object(s) {listed(unreached)} modelled below the coverage target {target}: no reachable view was left"
+               if unreached else "",
+               f"object(s) {', '.join(str(o.id) for o in stuck)} left unknown: no view to model it could be reached"
+               if stuck else "",
+               "object(s) {} seen with too few points to tell from noise: no closer view".format(
+                   ", ".join(f"{o.id} ({len(o.cluster.points)} points)" for o in glimpsed)) if glimpsed else ""]
+        if any(why):
+            return NO_CANDIDATES, "; ".join(w for w in why if w)
+        cut = [o for o in modelled if o.modelling_end == VIEW_BUDGET and not o.coverage_estimate >= target]
+        if cut:
+            return BUDGET, f"view budget of {self.settings.max_views} used up modelling object(s) {listed(cut)}"
+        unexplained = [str(o.id) for o in self.candidates() if not o.explained]
+        if unexplained and self.budget_left <= 0:
+            return BUDGET, (f"view budget of {self.settings.max_views} used up with object(s) "
+                            f"{', '.join(unexplained)} unexplained")
+        return "", ""
+
     # -- segmentation and association ------------------------------------------------------------
     def segment(self) -> list[SceneObject]:
         """Segment the views taken since the last call and attach their clusters to objects."""
@@ -244,7 +291,7 @@ class SceneSession:
         self.object_modelling.model_unknown()
         self.recognition.recognise_all()
         self.database_update.remember_locations()
-        return self.all_explained or self.budget_left <= 0 or not self.by_status(UNEXPLAINED, UNKNOWN, AMBIGUOUS)
+        return self.all_explained or self.budget_left <= 0 or not self.open_objects()
 
     def run(self, max_rounds: int = 10) -> dict[str, Any]:
         """Explore until every object is explained (or the view budget is spent); the metrics."""
@@ -267,7 +314,8 @@ class SceneSession:
             "objects_found": [
                 {"id": o.id, "status": o.status, "model": o.model, "points": int(len(o.cluster.points)),
                  "views": len(o.cluster.view_ids), "q_h": o.q_h, "v_h": o.v_h, "multi_views": o.multi_views,
-                 "modelling_scans": o.modelling_scans, "coverage_estimate": o.coverage_estimate,
+                 "modelling_scans": o.modelling_scans, "modelling_end": o.modelling_end,
+                 "coverage_estimate": o.coverage_estimate,
                  "rejected": o.rejected, "events": o.events}
                 for o in self.candidates()
             ],

@@ -43,7 +43,9 @@ def _displacement(scan: Any, pose: Pose, recorded: Pose) -> float:
     return float(np.linalg.norm(transform_points(pose @ invert(recorded), corners) - corners, axis=1).max())
 
 
-FARTHER = (1.0, 0.75, 0.5, 1.5, 2.0)  # the viewing distance's scales a closer look tries, nearer first
+NEARER = (1.0, 0.75, 0.5)  # the viewing distance's scales a view tries first (an arm reaches steep views closer)
+BEYOND = (1.5, 2.0)  # and then, for a base that cannot come near (an object in the middle of a table)
+FARTHER = NEARER + BEYOND  # the scales a closer look tries, nearer first
 
 
 class ViewTaking:
@@ -110,7 +112,7 @@ class ViewTaking:
                     break
         return taken
 
-    def next_view(self, obj: SceneObject, purpose: str, scales: Sequence[float] = (1.0, 0.75, 0.5)) -> View | None:
+    def next_view(self, obj: SceneObject, purpose: str, scales: Sequence[float] = NEARER) -> View | None:
         """Take the reachable view of ``obj`` farthest (in angle) from the views that saw it.
 
         A direction the robot cannot reach at the viewing distance is tried at the other
@@ -158,6 +160,8 @@ class ViewTaking:
             while any(o is obj for o in scene.too_small()) and obj.closer_looks < views and scene.budget_left > 0:
                 obj.closer_looks += 1
                 if self.next_view(obj, "closer look", FARTHER) is None:
+                    obj.closer_look_unreached = scene.budget_left > 0
+                    obj.note("no closer view reachable" if obj.closer_look_unreached else "no views left")
                     break
                 taken += 1
                 scene.segment()
