@@ -47,7 +47,14 @@ from explore.perception.segmentation import (
     merge_clusters,
     ransac_iterations,
 )
-from explore.perception.validation import ACCEPT_FROM, FREE_BELOW, OCCUPIED_FROM, Validation, pvs_votes
+from explore.perception.validation import (
+    ACCEPT_FROM,
+    FREE_BELOW,
+    OCCUPIED_FROM,
+    Validation,
+    pvs_votes,
+    vote_points,
+)
 from explore.perception.verification import icp_refine, inlier_fraction, render_and_compare
 from explore.perception.vfh import VFHRecognizer, vfh_signature
 
@@ -109,6 +116,7 @@ __all__ = [
     "refine_planar",
     "pose_graph_from_scans",
     "pvs_votes",
+    "vote_points",
     "ransac_iterations",
     "rebase_scan",
     "register_pair",

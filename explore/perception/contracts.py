@@ -67,7 +67,8 @@ class Recognizer(Plugin, ABC):
 class PoseValidator(Plugin, ABC):
     """Contract of kind ``pose_validator``: does the PVS agree with a model at a pose?
 
-    :meth:`validate` places ``model_vertices`` (n, 3, model frame, metres) at ``pose``
+    :meth:`validate` places ``model_vertices`` (n, 3, model frame, metres; the scene passes the
+    mesh's vertices and samples on its large faces, :func:`~explore.perception.vote_points`) at ``pose``
     (world_T_model) in the PVS and returns a :class:`~explore.perception.validation.Validation`
     (score v_h, vertex counts, accepted, margin to the threshold); Kriegel Eq. 3.11.
     """

@@ -8,6 +8,11 @@ occupancy p of their voxel into V_free (p < 0.25), V_unk (0.25 <= p < 0.75) and 
     v_h = (0.5 |V_unk| + |V_occ|) / (|V_free| + 0.5 |V_unk| + |V_occ|)        (Eq. 3.11)
 
 and the hypothesis is rejected below 0.66 (the cluster is then treated as unknown).
+
+The thesis' models are dense scanned meshes, whose vertices cover the surface. A CAD-like model
+is not: a cube has 8 vertices, all on edges whose voxels beams grazing past the object see free,
+so v_h falls in steps of 1/8 and the right pose can fail (0.625). :func:`vote_points` adds
+surface samples on the large faces of a mesh that coarse.
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ from typing import Any
 import numpy as np
 
 from explore.core import Points3, Pose, reaches, transform_points
+from explore.mapping import sample_surface
+from explore.sim import TriMesh
 
 FREE_BELOW = 0.25
 OCCUPIED_FROM = 0.75
@@ -38,6 +45,25 @@ class Validation:
     def as_dict(self) -> dict[str, Any]:
         return {"score": self.score, "free": self.free, "unknown": self.unknown,
                 "occupied": self.occupied, "accepted": self.accepted, "margin": self.margin}
+
+
+def vote_points(mesh: TriMesh, spacing: float, coarse: float = 3.0) -> Points3:
+    """The points a model votes with (Eq. 3.11): its vertices; and, for a mesh whose vertices lie
+    more than ``coarse`` x ``spacing`` apart on average (a CAD-like model: one vertex per more than
+    ``coarse``² voxel areas of surface), about one area-uniform sample per ``spacing``² on every
+    triangle larger than that (the same samples on every call).
+
+    A denser mesh (a scanned or modelled one, the mug's 446 vertices over 1 900 voxel areas) votes
+    with its vertices alone, as in the thesis: its large triangles are mostly the fans that close
+    its holes, which span openings the sensor saw through (the shape sorter's holes), not surface.
+    """
+    tris = mesh.vertices[mesh.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    large = area > spacing * spacing
+    if len(mesh.vertices) * (coarse * spacing) ** 2 >= area.sum() or not large.any():
+        return np.asarray(mesh.vertices, dtype=np.float64)
+    samples, _ = sample_surface(TriMesh(mesh.vertices, mesh.triangles[large]), spacing * spacing)
+    return np.vstack([mesh.vertices, samples])
 
 
 def pvs_votes(

@@ -78,7 +78,7 @@ class Recognition:
 
     def _validate_one(self, hypothesis: Hypothesis) -> Hypothesis:
         scene = self.scene
-        result = scene.validator.validate(scene.pvs, scene.model_vertices[hypothesis.model], hypothesis.pose)
+        result = scene.validator.validate(scene.pvs, scene.model_vote_points[hypothesis.model], hypothesis.pose)
         return dataclasses.replace(hypothesis, diagnostics={**hypothesis.diagnostics, "v_h": result.score,
                                                               "v_accepted": result.accepted, "v_margin": result.margin})
 
@@ -170,7 +170,7 @@ class Recognition:
         if best is None:
             return False
         name, fused, mine = best
-        check = scene.validator.validate(scene.pvs, scene.model_vertices[name], fused.pose)
+        check = scene.validator.validate(scene.pvs, scene.model_vote_points[name], fused.pose)
         if not check.accepted:
             obj.note(f"{len(fused.members)} views agree on {name}, but the PVS rejects the fused pose")
             return False

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, NO_CANDIDATES, Points3
-from explore.perception import Cluster, Model, Table, require_role
+from explore.perception import Cluster, Model, Table, require_role, vote_points
 from explore.scene.database_update import DatabaseUpdate
 from explore.scene.motion import Mover
 from explore.scene.object_modelling import ObjectModelling
@@ -109,7 +109,7 @@ class SceneSession:
         self.table: Table | None = None
         self.pending_views: list[int] = []
         self.model_cache: list[Model] | None = None
-        self.model_vertices: dict[str, Points3] = {}
+        self.model_vote_points: dict[str, Points3] = {}  # what each model votes with (Eq. 3.11)
         self.modelling_sessions: dict[int, Any] = {}
         self.added: list[str] = []
         self.known_at_start = list(database.names())
@@ -143,7 +143,7 @@ class SceneSession:
         """The database objects (meshes + stored descriptors), reloaded after an update."""
         if self.model_cache is None:
             self.model_cache = self.db.models()
-            self.model_vertices = {m.name: m.mesh.vertices for m in self.model_cache}
+            self.model_vote_points = {m.name: vote_points(m.mesh, self.resolution) for m in self.model_cache}
         return self.model_cache
 
     def object(self, object_id: int) -> SceneObject:
