@@ -628,3 +628,18 @@ def test_an_object_no_view_of_which_can_be_reached_ends_the_run_no_candidates(re
                             settings={"start_scene.db": str(tmp_path / "objects.db")}), registry)
     assert run.metrics["views"] == 1 and run.metrics["objects"][0]["result"] == result, run.metrics["objects"]
     assert run.status == "no_candidates" and run.reason.startswith(reason), (run.status, run.reason)
+
+
+def test_a_view_budget_that_cuts_modelling_short_ends_the_run_budget_exhausted(registry, tmp_path):
+    """scene_small with four views: the overview and the closer looks use them up before any modelling
+    scan, so the objects left are modelled from those views alone. The run ends budget_exhausted naming
+    them (not no_candidates: views were reachable, none were left to take)."""
+    from explore.runtime import RunConfig, execute
+
+    run = execute(RunConfig(tree="scene_exploration", world="scene_small", seed=0, out=tmp_path / "run",
+                            settings={"start_scene.db": str(tmp_path / "objects.db"), "start_scene.max_views": "4"}),
+                  registry)
+    cut = [o for o in run.metrics["objects_found"] if o["modelling_end"]]
+    assert run.metrics["views"] == 4 and cut and all(o["modelling_end"] == "view_budget" for o in cut), cut
+    assert run.status == "budget_exhausted" and run.reason.startswith("view budget of 4 used up modelling object(s)"), \
+        (run.status, run.reason)

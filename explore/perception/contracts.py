@@ -68,9 +68,10 @@ class PoseValidator(Plugin, ABC):
     """Contract of kind ``pose_validator``: does the PVS agree with a model at a pose?
 
     :meth:`validate` places ``model_vertices`` (n, 3, model frame, metres; the scene passes the
-    mesh's vertices and samples on its large faces, :func:`~explore.perception.vote_points`) at ``pose``
-    (world_T_model) in the PVS and returns a :class:`~explore.perception.validation.Validation`
-    (score v_h, vertex counts, accepted, margin to the threshold); Kriegel Eq. 3.11.
+    mesh's vertices, and samples on its large faces if it is coarse:
+    :func:`~explore.perception.vote_points`) at ``pose`` (world_T_model) in the PVS and returns a
+    :class:`~explore.perception.validation.Validation` (score v_h, vertex counts, accepted, margin
+    to the threshold); Kriegel Eq. 3.11.
     """
 
     kind = "pose_validator"

@@ -119,9 +119,15 @@ class ObjectModelling:
             view = scene.viewing.next_view(obj, f"model {obj.id}") or \
                 scene.viewing.next_view(obj, f"model {obj.id}", BEYOND)
         if view is None:
-            obj.modelling_end = NO_VIEW
             history = session.ctx.coverage_history
-            obj.note(f"modelling stopped: no reachable view left (ĉ_m = {history[-1] if history else 0.0:.3f})")
+            estimate = f"ĉ_m = {history[-1] if history else 0.0:.3f}"
+            if scene.budget_left <= 0:
+                obj.modelling_end = VIEW_BUDGET
+                obj.note(f"modelling stopped: the scene's view budget of {scene.settings.max_views} is used up "
+                         f"({estimate})")
+            else:
+                obj.modelling_end = NO_VIEW
+                obj.note(f"modelling stopped: no reachable view left ({estimate})")
             return True
         obj.modelling_scans += 1
         session.integrate_view(view.scan, view.believed, None if candidate is not None else "scene_view")

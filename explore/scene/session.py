@@ -180,19 +180,26 @@ class SceneSession:
             return ", ".join(f"{o.id} (ĉ_m {o.coverage_estimate:.2f}, {o.modelling_scans} scans)" for o in objects)
 
         modelled = self.by_status(MODELLED)
-        unreached = [o for o in modelled if o.modelling_end in (NO_VIEW, NO_PROGRESS)
-                     and not o.coverage_estimate >= target]
-        stuck = [o for o in self.by_status(UNKNOWN) if o.modelling_end == NO_VIEW]
-        glimpsed = [o for o in self.too_small() if o.closer_look_unreached]
-        why = [f"object(s) {listed(unreached)} modelled below the coverage target {target}: no reachable view was left"
-               if unreached else "",
-               f"object(s) {', '.join(str(o.id) for o in stuck)} left unknown: no view to model it could be reached"
-               if stuck else "",
-               "object(s) {} seen with too few points to tell from noise: no closer view".format(
-                   ", ".join(f"{o.id} ({len(o.cluster.points)} points)" for o in glimpsed)) if glimpsed else ""]
-        if any(why):
-            return NO_CANDIDATES, "; ".join(w for w in why if w)
-        cut = [o for o in modelled if o.modelling_end == VIEW_BUDGET and not o.coverage_estimate >= target]
+        below = [o for o in modelled if not o.coverage_estimate >= target]
+        unreached = [o for o in below if o.modelling_end == NO_VIEW]
+        stalled = [o for o in below if o.modelling_end == NO_PROGRESS]
+        stuck = [str(o.id) for o in self.by_status(UNKNOWN) if o.modelling_end == NO_VIEW]
+        glimpsed = [f"{o.id} ({len(o.cluster.points)} points)" for o in self.too_small() if o.closer_look_unreached]
+        reasons = []
+        if unreached:
+            reasons.append(f"object(s) {listed(unreached)} modelled below the coverage target {target}: "
+                           "no reachable view was left")
+        if stalled:
+            reasons.append(f"object(s) {listed(stalled)} modelled below the coverage target {target}: "
+                           "the termination rule saw no progress left")
+        if stuck:
+            reasons.append(f"object(s) {', '.join(stuck)} left unknown: no view to model it could be reached")
+        if glimpsed:
+            reasons.append(f"object(s) {', '.join(glimpsed)} seen with too few points to tell from noise: "
+                           "no closer view")
+        if reasons:
+            return NO_CANDIDATES, "; ".join(reasons)
+        cut = [o for o in below if o.modelling_end == VIEW_BUDGET]
         if cut:
             return BUDGET, f"view budget of {self.settings.max_views} used up modelling object(s) {listed(cut)}"
         unexplained = [str(o.id) for o in self.candidates() if not o.explained]
