@@ -350,6 +350,11 @@ class Recognition:
         scene = self.scene
         if obj.status != AMBIGUOUS:
             return
+        if obj.rivals and all(r.model == obj.model for r in obj.rivals):
+            # only the pose is in doubt (a shape sorter turned by 90°, a mug with its handle hidden):
+            # the views taken may each settle it alone, as the views of a rival-free object do
+            self.collect_view_hypotheses(obj)
+            self.fuse(obj)
         agreed = obj.fused is not None and len(obj.fused.members) >= scene.settings.multi_view_agree
         checked = sum(1 for _, name in obj.checked_views if name == obj.model)
         unconfirmed = obj.fused is not None and not obj.rivals and checked <= len(obj.fused.members)
