@@ -57,8 +57,7 @@ def vote_points(mesh: TriMesh, spacing: float, coarse: float = 3.0) -> Points3:
     with its vertices alone, as in the thesis: its large triangles are mostly the fans that close
     its holes, which span openings the sensor saw through (the shape sorter's holes), not surface.
     """
-    tris = mesh.vertices[mesh.triangles]
-    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    area = mesh.triangle_areas()
     large = area > spacing * spacing
     if len(mesh.vertices) * (coarse * spacing) ** 2 >= area.sum() or not large.any():
         return np.asarray(mesh.vertices, dtype=np.float64)

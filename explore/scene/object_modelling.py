@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Array
+from explore.core import BUDGET, SUCCESS, Array
 from explore.scene.motion import target_start
 from explore.scene.scene_objects import (
     AMBIGUOUS,
@@ -87,14 +87,10 @@ class ObjectModelling:
         if own_scans > 0:
             decision = session.terminate()
             if decision.stop:
-                obj.modelling_end = {SUCCESS: TARGET, BUDGET: SCAN_BUDGET, NO_CANDIDATES: NO_PROGRESS}.get(
-                    decision.outcome, NO_PROGRESS)
-                obj.note(f"modelling stopped: {decision.reason}")
-                return True
+                end = {SUCCESS: TARGET, BUDGET: SCAN_BUDGET}.get(decision.outcome, NO_PROGRESS)
+                return _stopped(obj, end, decision.reason)
             if own_scans >= scene.settings.model_scans:
-                obj.modelling_end = SCAN_BUDGET
-                obj.note(f"modelling stopped: scan budget of {own_scans} used ({decision.reason})")
-                return True
+                return _stopped(obj, SCAN_BUDGET, f"scan budget of {own_scans} used ({decision.reason})")
         session.generate()
         target, configs, candidate = None, None, None
         centre = obj.cluster.centroid
@@ -122,13 +118,8 @@ class ObjectModelling:
             history = session.ctx.coverage_history
             estimate = f"ĉ_m = {history[-1] if history else 0.0:.3f}"
             if scene.budget_left <= 0:
-                obj.modelling_end = VIEW_BUDGET
-                obj.note(f"modelling stopped: the scene's view budget of {scene.settings.max_views} is used up "
-                         f"({estimate})")
-            else:
-                obj.modelling_end = NO_VIEW
-                obj.note(f"modelling stopped: no reachable view left ({estimate})")
-            return True
+                return _stopped(obj, VIEW_BUDGET, f"{self._out_of_views()} ({estimate})")
+            return _stopped(obj, NO_VIEW, f"no reachable view left ({estimate})")
         obj.modelling_scans += 1
         session.integrate_view(view.scan, view.believed, None if candidate is not None else "scene_view")
         session.ctx.sensor_pose = view.believed.copy()
@@ -144,10 +135,11 @@ class ObjectModelling:
                 return True
             obj.status = MODELLING
         if scene.budget_left <= 0:
-            obj.modelling_end = VIEW_BUDGET
-            obj.note(f"modelling stopped: the scene's view budget of {scene.settings.max_views} is used up")
-            return True
+            return _stopped(obj, VIEW_BUDGET, self._out_of_views())
         return False
+
+    def _out_of_views(self) -> str:
+        return f"the scene's view budget of {self.scene.settings.max_views} is used up"
 
     def finish_modelling(self, obj: SceneObject) -> str | None:
         """Turn the modelled surface into a database object (iterative recognition); its name."""
@@ -200,3 +192,10 @@ class ObjectModelling:
                 finished = self.model_step(obj)
             if obj.status == MODELLING:
                 self.finish_modelling(obj)
+
+
+def _stopped(obj: SceneObject, end: str, reason: str) -> bool:
+    """End the object's modelling: record why (``modelling_end``) and say so; True (finished)."""
+    obj.modelling_end = end
+    obj.note(f"modelling stopped: {reason}")
+    return True

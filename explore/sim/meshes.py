@@ -34,9 +34,13 @@ class TriMesh:
         mesh.compute_vertex_normals()
         return mesh
 
-    def area(self) -> float:
+    def triangle_areas(self) -> np.ndarray:
+        """(m,) area of every triangle."""
         a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
-        return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+    def area(self) -> float:
+        return float(self.triangle_areas().sum())
 
     @staticmethod
     def concatenate(meshes: list[TriMesh]) -> TriMesh:
