@@ -100,6 +100,27 @@ def test_bad_world_is_one_clear_line(open_world, tmp_path, text, message) -> Non
     assert "\n" not in line
 
 
+def test_bodies_touching_load_and_bodies_passing_through_each_other_do_not(open_world, tmp_path) -> None:
+    """Two 4 cm cubes side by side with a 1 mm gap load; overlapping by 1 cm their faces cross
+    along a 4 cm segment and the world is refused, naming both."""
+    from explore.sim.meshes import box_mesh
+    from explore.sim.simulation import surface_crossings
+
+    cube = box_mesh([0.04, 0.04, 0.04])
+    apart = surface_crossings(cube, type(cube)(cube.vertices + [0.041, 0.0, 0.0], cube.triangles))
+    crossing = surface_crossings(cube, type(cube)(cube.vertices + [0.03, 0.0, 0.0], cube.triangles))
+    assert len(apart) == 0
+    assert np.ptp(crossing, axis=0).max() == pytest.approx(0.04, abs=1e-6)
+    pair = GOOD.replace("region:", "  - {name: cube, box: [0.04, 0.04, 0.04], position: [0.0, %s], on_top_of: pedestal}"
+                        "\nregion:")
+    path = tmp_path / "pair.yaml"
+    path.write_text(pair % "0.09")  # beside the bunny (0.1 m long), not in it
+    open_world(load_world_spec(path)).close()
+    path.write_text(pair % "0.0")
+    with pytest.raises(BadInput, match=r"objects\[1\] \(cube\): intersects objects\[0\] \(bunny\)"):
+        open_world(load_world_spec(path)).close()
+
+
 def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-c", "from explore_cli.main import run; run()", *args],

@@ -19,6 +19,7 @@ from explore.sim.meshes import TriMesh, read_mesh
 from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
 
 CONTACT_GAP = 5e-4  # m between a body and the body it rests on
+OVERLAP_TOLERANCE = 0.005  # m: surfaces crossing over less than this are bodies touching, not intersecting
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,21 @@ class RayCaster:
         return t_hit, index, normals
 
 
+def surface_crossings(mesh: TriMesh, other: TriMesh) -> Points3:
+    """Where the edges of ``mesh``'s triangles pass through ``other``'s surface (world points):
+    two surfaces intersect exactly where an edge of one crosses a triangle of the other."""
+    edges = np.unique(np.sort(mesh.triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
+    start = mesh.vertices[edges[:, 0]]
+    vector = mesh.vertices[edges[:, 1]] - start
+    length = np.linalg.norm(vector, axis=1)
+    keep = length > 1e-9
+    start, vector, length = start[keep], vector[keep], length[keep]
+    direction = vector / length[:, None]
+    distance, hit, _ = RayCaster([other]).cast(start, direction)
+    crossed = (hit >= 0) & (distance < length)
+    return start[crossed] + direction[crossed] * distance[crossed, None]
+
+
 class Simulation:
     """A world in pybullet plus its ground truth. Create one per run; ``close()`` it."""
 
@@ -77,6 +93,7 @@ class Simulation:
                 for body in self.spec.objects:
                     self._add(body, is_object=True)
             self._check_region()
+            self._check_overlaps()
         except BaseException:
             self.close()
             raise
@@ -214,6 +231,28 @@ class Simulation:
                     f"extends outside the region: object box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}, "
                     f"region {self.spec.region_min.tolist()}..{self.spec.region_max.tolist()}",
                 )
+
+    def _check_overlaps(self) -> None:
+        """No object may intersect another body: a world whose objects pass through each other or
+        through the table is no scene a robot could meet (the segmentation would see one object)."""
+        objects = [b for b in self.bodies if b.is_object]
+        for index, body in enumerate(objects):
+            lo, hi = body.mesh.bounds
+            for other in self.bodies:
+                if other is body or (other.is_object and objects.index(other) > index):
+                    continue
+                olo, ohi = other.mesh.bounds
+                if np.any(lo > ohi + OVERLAP_TOLERANCE) or np.any(olo > hi + OVERLAP_TOLERANCE):
+                    continue
+                crossings = np.vstack([surface_crossings(body.mesh, other.mesh),
+                                       surface_crossings(other.mesh, body.mesh)])
+                extent = float(np.ptp(crossings, axis=0).max()) if len(crossings) else 0.0
+                if extent > OVERLAP_TOLERANCE:
+                    kind = "objects" if other.is_object else "environment"
+                    position = [b for b in self.bodies if b.is_object == other.is_object].index(other)
+                    raise BadInput(str(self.spec.path), f"objects[{index}] ({body.name})",
+                                   f"intersects {kind}[{position}] ({other.name}): their surfaces cross over "
+                                   f"{1000.0 * extent:.0f} mm; move one of them")
 
     # -- queries -------------------------------------------------------------------------
     @property

@@ -84,6 +84,8 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "rpy_strings": ("expected a number", [("rpy_deg: [90, 0, 0]", "rpy_deg: [ninety, 0, 0]")]),
     "duplicate_body_names": ("used by two bodies", [("name: bunny", "name: pedestal")]),
     "object_outside_region": ("region", [("position: [0.0, 0.0]", "position: [0.5, 0.0]")]),
+    "objects_intersect": ("intersects objects[0] (bunny)",
+                          [("region:", "  - {name: block, box: [0.06, 0.06, 0.06], position: [0.0, 0.0], on_top_of: pedestal}\nregion:")]),
     "robot_unknown": ("unknown robot 'roomba'", [("plugin: free_flyer", "plugin: roomba")]),
     "robot_unknown_param": ("unknown parameter", [("plugin: free_flyer", "plugin: free_flyer\n  params: {wheels: 4}")]),
     "robot_params_list": ("expected a mapping", [("plugin: free_flyer", "plugin: free_flyer\n  params: [1, 2]")]),
