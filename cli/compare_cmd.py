@@ -42,7 +42,7 @@ def build_grid(
     strategies: str | None,
     planners: str | None,
     robots: str | None,
-    seeds: int,
+    seeds: str,
     max_scans: int | None,
     settings: list[str],
     timeout: float,
@@ -59,8 +59,7 @@ def build_grid(
     if worlds is None:
         raise BadInput("--worlds", None, "missing (comma-separated world names, see `explore worlds list`)")
     world_names = _names(worlds, "--worlds")
-    if seeds < 1:
-        raise BadInput("--seeds", str(seeds), "needs at least 1 seed")
+    seed_list = parse_seeds(seeds)
     if not (math.isfinite(timeout) and timeout > 0):
         raise BadInput("--timeout", str(timeout), "must be a positive finite number of seconds")
     if max_scans is not None and max_scans < 1:
@@ -92,10 +91,35 @@ def build_grid(
                                    max_scans=max_scans, settings=parsed_settings), registry)
     grid = Grid(
         tree=str(tree_path.resolve()), worlds=resolved_worlds, strategies=strategy_names, planners=planner_names,
-        robots=robot_names, seeds=list(range(seeds)), max_scans=max_scans,
+        robots=robot_names, seeds=seed_list, max_scans=max_scans,
         settings=parsed_settings, timeout=timeout, plugins=plugin_specs, threads=threads, videos=videos,
     )
     return grid, registry
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``N`` (seeds 0..N-1), ``A-B`` (A to B inclusive) or ``a,b,c``: the seeds of a grid."""
+    value = text.strip()
+    try:
+        if "," in value:
+            seeds = [int(part) for part in value.split(",")]
+        elif "-" in value.lstrip("-"):
+            first, last = (int(part) for part in value.split("-", 1))
+            if last < first:
+                raise BadInput("--seeds", text, f"the range ends before it starts ({last} < {first})")
+            seeds = list(range(first, last + 1))
+        else:
+            count = int(value)
+            if count < 1:
+                raise BadInput("--seeds", text, "needs at least 1 seed")
+            seeds = list(range(count))
+    except ValueError:
+        raise BadInput("--seeds", text, "expected N, a range A-B or a list a,b,c of whole numbers") from None
+    if any(seed < 0 for seed in seeds):
+        raise BadInput("--seeds", text, "seeds are whole numbers from 0")
+    if len(set(seeds)) != len(seeds):
+        raise BadInput("--seeds", text, "a seed is listed twice")
+    return seeds
 
 
 def register(app: typer.Typer) -> None:
@@ -114,7 +138,8 @@ def register(app: typer.Typer) -> None:
         robots: Annotated[
             str | None, typer.Option("--robots", help="Comma-separated robots (default: each world's).")
         ] = None,
-        seeds: Annotated[int, typer.Option("--seeds", help="Seeds 0..N-1 for every combination.")] = 1,
+        seeds: Annotated[str, typer.Option(
+            "--seeds", help="Seeds of every combination: N (0..N-1), a range A-B or a list such as 0,3,7.")] = "1",
         jobs: Annotated[int, typer.Option("--jobs", "-j", help="Concurrent runs (0: one per core).")] = 0,
         executor: Annotated[str, typer.Option("--executor", help="Executor plugin: local or ray.")] = "local",
         ray_address: Annotated[

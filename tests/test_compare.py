@@ -478,7 +478,18 @@ BAD = [
     (["--planners", "warp"], "unknown motion_planner 'warp'"),
     (["--executor", "slurm"], "unknown executor 'slurm' (valid: local, ray)"),
     (["--seeds", "0"], "--seeds: 0: needs at least 1 seed"),
+    (["--seeds", "4-1"], "--seeds: 4-1: the range ends before it starts"),
+    (["--seeds", "0-x"], "--seeds: 0-x: expected N, a range A-B or a list"),
+    (["--seeds", "1,1"], "--seeds: 1,1: a seed is listed twice"),
 ]
+
+
+def test_seeds_are_a_count_a_range_or_a_list() -> None:
+    from explore_cli.compare_cmd import parse_seeds
+
+    assert parse_seeds("3") == [0, 1, 2]
+    assert parse_seeds("5-9") == [5, 6, 7, 8, 9]
+    assert parse_seeds("0,3,7") == [0, 3, 7]
 
 
 @pytest.mark.parametrize(("change", "message"), BAD)
