@@ -74,6 +74,8 @@ class SceneObject:
     rejected: list[dict[str, Any]] = field(default_factory=list)
     view_hypotheses: list[tuple[int, Hypothesis]] = field(default_factory=list)
     checked_views: set[tuple[int, str]] = field(default_factory=set)
+    # view -> why that view alone did or did not confirm a pose (q_h, N_m/N_r, PVS votes): the margins
+    view_checks: dict[int, str] = field(default_factory=dict)
     fused: FusedPose | None = None
     multi_views: int = 0
     modelling_scans: int = 0
