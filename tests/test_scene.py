@@ -681,3 +681,29 @@ def test_known_near_symmetric_and_coarse_objects_are_recognised_not_learned_anew
     assert rows["sorter"]["pose_error_mm"] < 5.0 and rows["sorter"]["pose_error_deg"] < 2.0, rows["sorter"]
     assert rows["cube"]["surface_error_mm"] < 1.0, rows["cube"]
     assert run.metrics["added_to_database"] == ["near_symmetric-1"]  # the ball alone is new
+
+
+def test_views_that_see_a_mug_turned_confirm_the_pose_of_all_views_together() -> None:
+    """Two views each confirm the mug alone, 54 degrees apart (one did not see the handle); the
+    one within 1 cm / 5 degrees of the merged pose confirms it. One confirming view, or a rival
+    model, confirms nothing."""
+    from types import SimpleNamespace
+
+    from explore.core import pose_from, rpy_deg_to_matrix
+    from explore.perception import Hypothesis
+    from explore.scene import SceneSettings
+    from explore.scene.recognition import Recognition
+    from explore.scene.scene_objects import SceneObject
+
+    merged = pose_from(np.array([1.0, 2.0, 0.7]), rpy_deg_to_matrix([0.0, 0.0, 30.0]))
+    near = pose_from(np.array([1.002, 2.0, 0.7]), rpy_deg_to_matrix([0.0, 0.0, 34.0]))
+    turned = pose_from(np.array([1.0, 2.0, 0.7]), rpy_deg_to_matrix([0.0, 0.0, 84.0]))
+    recognition = Recognition(SimpleNamespace(settings=SceneSettings()))
+    obj = SceneObject(20, cluster=None, model="mug", pose=merged, q_h=0.72)
+    obj.view_hypotheses = [(22, Hypothesis("mug", near, 0.82, "ppf")), (25, Hypothesis("mug", turned, 0.83, "ppf"))]
+    assert [view for view, _ in recognition._confirming_the_merged_pose(obj)] == [22]
+    obj.view_hypotheses = obj.view_hypotheses[:1]
+    assert recognition._confirming_the_merged_pose(obj) == []
+    obj.view_hypotheses = [(22, Hypothesis("mug", near, 0.82, "ppf")), (25, Hypothesis("mug", turned, 0.83, "ppf"))]
+    obj.rivals = [Hypothesis("cup", turned, 0.7, "ppf")]
+    assert recognition._confirming_the_merged_pose(obj) == []
