@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from explore.core import Array, Points3
+from explore.sim import TriMesh
 
 #: a hole lying wholly this close above the support plane is where the object stands (m), as
 #: hole rescan's ``contact_band``: a flat-bottomed dish's contact loop lies within 2.4 mm of the
@@ -146,13 +147,6 @@ def hole_fan_area(vertices: Points3, loop: np.ndarray) -> float:
     return float(0.5 * np.linalg.norm(np.cross(a, b), axis=1).sum())
 
 
-def _triangle_areas(vertices: Points3, triangles: np.ndarray) -> Array:
-    if len(triangles) == 0:
-        return np.zeros(0)
-    a, b, c = (vertices[triangles[:, i]] for i in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-
 def vertex_normals_of(vertices: Points3, triangles: np.ndarray) -> Points3:
     """Area-weighted unit vertex normals (zero for unreferenced vertices)."""
     normals = np.zeros((len(vertices), 3))
@@ -267,7 +261,7 @@ def coverage_areas(vertices: Points3, triangles: np.ndarray, support_z: float | 
     """ĉ_m with every hole, and ĉ_m without the holes lying wholly within ``support_margin`` above
     ``support_z`` (where the object stands: no sensor sees it), from one search for holes."""
     vertices = np.asarray(vertices, dtype=float)
-    filled = float(_triangle_areas(vertices, np.asarray(triangles)).sum())
+    filled = TriMesh(vertices, np.asarray(triangles).reshape(-1, 3)).area()
     if filled <= 0.0:
         return 0.0, 0.0
     holes = holes_of(vertices, triangles, max_perimeter=max_perimeter)
