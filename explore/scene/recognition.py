@@ -38,6 +38,12 @@ if TYPE_CHECKING:
     from explore.scene.session import SceneSession
 
 
+def _agree(pose: Pose, other: Pose) -> bool:
+    """Two poses of one model agree within the fusion radius of :func:`fuse_poses` (1 cm, 5°)."""
+    t_err, r_err = pose_error(pose, other)
+    return t_err <= 0.01 and math.degrees(r_err) <= 5.0
+
+
 class Recognition:
     """The recognition step: recognise, validate, resolve ambiguity with more views."""
 
@@ -257,8 +263,7 @@ class Recognition:
         fused = obj.fused
         if fused is None or obj.pose is None or len(fused.members) < self.scene.settings.multi_view_agree:
             return False
-        t_err, r_err = pose_error(fused.pose, obj.pose)
-        return t_err <= 0.01 and math.degrees(r_err) <= 5.0
+        return _agree(fused.pose, obj.pose)
 
     def fuse(self, obj: SceneObject) -> FusedPose | None:
         """Fuse the per-view hypotheses of the object's current model (weights q_h)."""
@@ -351,7 +356,9 @@ class Recognition:
         checked (Kriegel's single-view recognition: q_h and the PVS votes passed); else the object is
         unknown. One confirming view among several that do not is no recognition: a flat jenga block
         was taken for a similar part's model from one view after 10 more views confirmed nothing
-        (``tabletop_similar``, seed 1)."""
+        (``tabletop_similar``, seed 1). Views that confirm the model alone but each at another turn
+        settle it at the merged views' pose if one of them confirms that pose
+        (:meth:`_confirming_the_merged_pose`)."""
         scene = self.scene
         if obj.status != AMBIGUOUS:
             return
@@ -396,12 +403,7 @@ class Recognition:
         own = [(v, h) for v, h in obj.view_hypotheses if h.model == obj.model]
         if len({v for v, _ in own}) < self.scene.settings.multi_view_agree:
             return []
-        close = []
-        for view, h in own:
-            t_err, r_err = pose_error(h.pose, obj.pose)
-            if t_err <= 0.01 and math.degrees(r_err) <= 5.0:
-                close.append((view, h))
-        return close
+        return [(view, h) for view, h in own if _agree(h.pose, obj.pose)]
 
     def resolve_ambiguous(self) -> None:
         """Multi-view recognition of every ambiguous object until it is resolved."""
