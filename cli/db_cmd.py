@@ -76,6 +76,8 @@ def register(app: typer.Typer) -> None:
         """Add an object from a mesh file (creates the database if needed)."""
         import math
 
+        import numpy as np
+
         from explore.sim import TriMesh, read_mesh
 
         from .main import console
@@ -89,6 +91,11 @@ def register(app: typer.Typer) -> None:
         except (OSError, ValueError) as error:
             raise BadInput(str(mesh), None, f"cannot read the mesh: {error}") from None
         loaded = TriMesh(loaded.vertices * scale, loaded.triangles)
+        lo, hi = loaded.bounds
+        extent = float(np.max(hi - lo))
+        if not 1e-3 <= extent <= 100.0:
+            raise BadInput(str(mesh), "--scale", f"the mesh is {extent:.3g} m across with --scale {scale:g}: "
+                                                 "no object a robot models (0.001 turns millimetres into metres)")
         stored = {}
         with _open(db, create=True) as database:
             database.check_name(name)

@@ -115,11 +115,13 @@ def read_mesh(path: str | Path) -> TriMesh:
     path = Path(path)
     if path.suffix.lower() == ".obj":
         return read_obj(path)
+    if path.suffix.lower() not in (".stl", ".ply"):
+        raise ValueError(f"{path.name}: unsupported file type {path.suffix!r} (use .obj, .stl or .ply)")
     import open3d as o3d
 
     from explore.core import captured_output
 
-    with captured_output():  # Open3D's "[Open3D WARNING] Read ... failed" would come before our one line
+    with captured_output(stdout=True):  # Open3D's "[Open3D WARNING] Read ... failed" would come before our line
         mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise ValueError(f"{path.name}: no triangles (not a readable mesh)")
