@@ -102,15 +102,18 @@ def test_bad_world_is_one_clear_line(open_world, tmp_path, text, message) -> Non
 
 def test_bodies_touching_load_and_bodies_passing_through_each_other_do_not(open_world, tmp_path) -> None:
     """Two 4 cm cubes side by side with a 1 mm gap load; overlapping by 1 cm their faces cross
-    along a 4 cm segment and the world is refused, naming both."""
+    along a 4 cm segment, a corner lies 1 cm inside the other, and the world is refused, naming
+    both. A ball pressed 0.8 mm into its support only touches it."""
     from explore.sim.meshes import box_mesh
-    from explore.sim.simulation import surface_crossings
+    from explore.sim.simulation import depth_behind, surface_crossings
 
     cube = box_mesh([0.04, 0.04, 0.04])
     apart = surface_crossings(cube, type(cube)(cube.vertices + [0.041, 0.0, 0.0], cube.triangles))
     crossing = surface_crossings(cube, type(cube)(cube.vertices + [0.03, 0.0, 0.0], cube.triangles))
     assert len(apart) == 0
     assert np.ptp(crossing, axis=0).max() == pytest.approx(0.04, abs=1e-6)
+    moved = type(cube)(cube.vertices + [0.03, 0.0, 0.0], cube.triangles)
+    assert depth_behind(moved, cube) == pytest.approx(0.01, abs=1e-6)  # its left face 1 cm inside
     pair = GOOD.replace("region:", "  - {name: cube, box: [0.04, 0.04, 0.04], position: [0.0, %s], on_top_of: pedestal}"
                         "\nregion:")
     path = tmp_path / "pair.yaml"
@@ -119,6 +122,9 @@ def test_bodies_touching_load_and_bodies_passing_through_each_other_do_not(open_
     path.write_text(pair % "0.0")
     with pytest.raises(BadInput, match=r"objects\[1\] \(cube\): intersects objects\[0\] \(bunny\)"):
         open_world(load_world_spec(path)).close()
+    # a 3 cm ball pressed 0.8 mm into the pedestal top (a hand-set height): touching, not intersecting
+    path.write_text(GOOD.replace("region:", "  - {name: ball, sphere: 0.015, position: [0.06, 0.06, 0.5142]}\nregion:"))
+    open_world(load_world_spec(path)).close()
 
 
 def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:

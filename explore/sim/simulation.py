@@ -19,7 +19,10 @@ from explore.sim.meshes import TriMesh, read_mesh
 from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
 
 CONTACT_GAP = 5e-4  # m between a body and the body it rests on
-OVERLAP_TOLERANCE = 0.005  # m: surfaces crossing over less than this are bodies touching, not intersecting
+# bodies whose surfaces cross over less than OVERLAP_TOLERANCE, or with no vertex deeper than
+# PENETRATION_TOLERANCE in the other, touch (a ball resting in a bowl set by hand); else they intersect
+OVERLAP_TOLERANCE = 0.005  # m
+PENETRATION_TOLERANCE = 0.002  # m
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,24 @@ def surface_crossings(mesh: TriMesh, other: TriMesh) -> Points3:
     distance, hit, _ = RayCaster([other]).cast(start, direction)
     crossed = (hit >= 0) & (distance < length)
     return start[crossed] + direction[crossed] * distance[crossed, None]
+
+
+def depth_behind(mesh: TriMesh, other: TriMesh) -> float:
+    """How far (m) the deepest vertex or triangle centre of ``mesh`` lies behind ``other``'s surface: its
+    distance to the nearest point of that surface when it is on the side the face's normal points
+    away from (inside a closed body, below an open sheet); 0 if none is."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    tmesh = o3d.t.geometry.TriangleMesh()
+    tmesh.vertex.positions = o3d.core.Tensor(other.vertices.astype(np.float32))
+    tmesh.triangle.indices = o3d.core.Tensor(other.triangles.astype(np.int32))
+    scene.add_triangles(tmesh)
+    points = np.vstack([mesh.vertices, mesh.vertices[mesh.triangles].mean(axis=1)])
+    closest = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
+    offset = points - closest["points"].numpy()
+    behind = np.einsum("ij,ij->i", offset, closest["primitive_normals"].numpy()) < 0.0
+    return float(np.linalg.norm(offset[behind], axis=1).max(initial=0.0))
 
 
 class Simulation:
@@ -234,7 +255,10 @@ class Simulation:
 
     def _check_overlaps(self) -> None:
         """No object may intersect another body: a world whose objects pass through each other or
-        through the table is no scene a robot could meet (the segmentation would see one object)."""
+        through the table is no scene a robot could meet (the segmentation would see one object).
+        Surfaces that cross over more than ``OVERLAP_TOLERANCE`` with a vertex more than
+        ``PENETRATION_TOLERANCE`` behind the other's surface intersect; a slight press of one body
+        into another, as hand-placed positions give, is touching."""
         objects = [b for b in self.bodies if b.is_object]
         for index, body in enumerate(objects):
             lo, hi = body.mesh.bounds
@@ -247,12 +271,15 @@ class Simulation:
                 crossings = np.vstack([surface_crossings(body.mesh, other.mesh),
                                        surface_crossings(other.mesh, body.mesh)])
                 extent = float(np.ptp(crossings, axis=0).max()) if len(crossings) else 0.0
-                if extent > OVERLAP_TOLERANCE:
+                if extent <= OVERLAP_TOLERANCE:
+                    continue
+                depth = max(depth_behind(body.mesh, other.mesh), depth_behind(other.mesh, body.mesh))
+                if depth > PENETRATION_TOLERANCE:
                     kind = "objects" if other.is_object else "environment"
                     position = [b for b in self.bodies if b.is_object == other.is_object].index(other)
                     raise BadInput(str(self.spec.path), f"objects[{index}] ({body.name})",
                                    f"intersects {kind}[{position}] ({other.name}): their surfaces cross over "
-                                   f"{1000.0 * extent:.0f} mm; move one of them")
+                                   f"{1000.0 * extent:.0f} mm, {1000.0 * depth:.0f} mm deep; move one of them")
 
     # -- queries -------------------------------------------------------------------------
     @property
