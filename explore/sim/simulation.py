@@ -19,7 +19,7 @@ from explore.sim.meshes import TriMesh, read_mesh
 from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
 
 CONTACT_GAP = 5e-4  # m between a body and the body it rests on
-# bodies whose surfaces cross over less than OVERLAP_TOLERANCE, or with no vertex deeper than
+# bodies whose surfaces cross over less than OVERLAP_TOLERANCE, or with no point deeper than
 # PENETRATION_TOLERANCE in the other, touch (a ball resting in a bowl set by hand); else they intersect
 OVERLAP_TOLERANCE = 0.005  # m
 PENETRATION_TOLERANCE = 0.002  # m
@@ -64,6 +64,13 @@ class RayCaster:
         normals = result["primitive_normals"].numpy().astype(np.float64)
         return t_hit, index, normals
 
+    def closest(self, points: Points3) -> tuple[Points3, Points3]:
+        """The nearest surface point of every query point and the normal of its triangle."""
+        import open3d as o3d
+
+        result = self._scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, dtype=np.float32)))
+        return result["points"].numpy().astype(np.float64), result["primitive_normals"].numpy().astype(np.float64)
+
 
 def surface_crossings(mesh: TriMesh, other: TriMesh) -> Points3:
     """Where the edges of ``mesh``'s triangles pass through ``other``'s surface (world points):
@@ -84,17 +91,10 @@ def depth_behind(mesh: TriMesh, other: TriMesh) -> float:
     """How far (m) the deepest vertex or triangle centre of ``mesh`` lies behind ``other``'s surface: its
     distance to the nearest point of that surface when it is on the side the face's normal points
     away from (inside a closed body, below an open sheet); 0 if none is."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    tmesh = o3d.t.geometry.TriangleMesh()
-    tmesh.vertex.positions = o3d.core.Tensor(other.vertices.astype(np.float32))
-    tmesh.triangle.indices = o3d.core.Tensor(other.triangles.astype(np.int32))
-    scene.add_triangles(tmesh)
     points = np.vstack([mesh.vertices, mesh.vertices[mesh.triangles].mean(axis=1)])
-    closest = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
-    offset = points - closest["points"].numpy()
-    behind = np.einsum("ij,ij->i", offset, closest["primitive_normals"].numpy()) < 0.0
+    nearest, normals = RayCaster([other]).closest(points)
+    offset = points - nearest
+    behind = np.einsum("ij,ij->i", offset, normals) < 0.0
     return float(np.linalg.norm(offset[behind], axis=1).max(initial=0.0))
 
 
@@ -256,7 +256,7 @@ class Simulation:
     def _check_overlaps(self) -> None:
         """No object may intersect another body: a world whose objects pass through each other or
         through the table is no scene a robot could meet (the segmentation would see one object).
-        Surfaces that cross over more than ``OVERLAP_TOLERANCE`` with a vertex more than
+        Surfaces that cross over more than ``OVERLAP_TOLERANCE`` with a point more than
         ``PENETRATION_TOLERANCE`` behind the other's surface intersect; a slight press of one body
         into another, as hand-placed positions give, is touching."""
         objects = [b for b in self.bodies if b.is_object]
