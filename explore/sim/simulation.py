@@ -259,12 +259,11 @@ class Simulation:
         Surfaces that cross over more than ``OVERLAP_TOLERANCE`` with a point more than
         ``PENETRATION_TOLERANCE`` behind the other's surface intersect; a slight press of one body
         into another, as hand-placed positions give, is touching."""
+        environment = [("environment", j, b) for j, b in enumerate(b for b in self.bodies if not b.is_object)]
         objects = [b for b in self.bodies if b.is_object]
         for index, body in enumerate(objects):
             lo, hi = body.mesh.bounds
-            for other in self.bodies:
-                if other is body or (other.is_object and objects.index(other) > index):
-                    continue
+            for kind, position, other in environment + [("objects", j, b) for j, b in enumerate(objects[:index])]:
                 olo, ohi = other.mesh.bounds
                 if np.any(lo > ohi + OVERLAP_TOLERANCE) or np.any(olo > hi + OVERLAP_TOLERANCE):
                     continue
@@ -275,8 +274,6 @@ class Simulation:
                     continue
                 depth = max(depth_behind(body.mesh, other.mesh), depth_behind(other.mesh, body.mesh))
                 if depth > PENETRATION_TOLERANCE:
-                    kind = "objects" if other.is_object else "environment"
-                    position = [b for b in self.bodies if b.is_object == other.is_object].index(other)
                     raise BadInput(str(self.spec.path), f"objects[{index}] ({body.name})",
                                    f"intersects {kind}[{position}] ({other.name}): their surfaces cross over "
                                    f"{1000.0 * extent:.0f} mm, {1000.0 * depth:.0f} mm deep; move one of them")
