@@ -110,7 +110,7 @@ name: cube_table
 environment:
   - {name: table, source: table/table.urdf, position: [0.0, 0.0, 0.3125]}
 objects:
-  - {name: cube, source: cube_small.urdf, size: 0.05, rpy_deg: [0, 0, 30], position: [0.0, 0.0], on_top_of: table}
+  - {name: cube, source: cube_small.urdf, size: 0.0366, rpy_deg: [0, 0, 30], position: [0.0, 0.0], on_top_of: table}
 region: {min: [-0.2, -0.2, 0.625], max: [0.2, 0.2, 0.75]}
 robot: {plugin: free_flyer}
 sensor: {plugin: depth_camera, params: {profile: ideal, width: 320, height: 240, min_range: 0.3, max_range: 2.0}}
@@ -118,7 +118,7 @@ sensor: {plugin: depth_camera, params: {profile: ideal, width: 320, height: 240,
 
 
 def test_a_model_with_few_vertices_votes_with_samples_of_its_faces(open_world, tmp_path) -> None:
-    """A 5 cm cube has 8 vertices, all on edges, whose 5 mm voxels the beams grazing past it see
+    """A 3.7 cm cube has 8 vertices, all on edges, whose 5 mm voxels the beams grazing past it see
     free: each vertex is an eighth of the vote, and poses within 2 mm / 2° of the truth (what
     recognition gives) fall to v_h 0.625 and are rejected. Samples on its faces (one per voxel
     area) carry the vote: every such pose is accepted, and a pose 2 cm towards a camera, in

@@ -52,6 +52,25 @@ def test_urdf_bodies_match_pybullet(open_world) -> None:
             assert body.mesh.bounds[0][2] >= 0.625 - 1e-6, body.name  # on the table top
 
 
+@pytest.mark.parametrize("source", ["jenga/jenga.urdf", "domino/domino.urdf", "cube.obj"])
+def test_a_turned_body_keeps_its_size(open_world, tmp_path, source) -> None:
+    """``size`` is the largest extent in the body's own frame, for URDFs as for meshes: the same
+    block turned 60° about z in a re-arranged world is the same block (a jenga block sized after its
+    rotation came out 0.8 of its length)."""
+    extents = []
+    for yaw in (0, 60):
+        path = tmp_path / f"turned{yaw}.yaml"
+        turned = f"source: {source}, size: 0.1, rpy_deg: [0, 0, {yaw}],"
+        path.write_text(GOOD.replace("source: bunny.obj, size: 0.1,", turned))
+        with open_world(path) as sim:
+            lo, hi = sim.object_mesh("bunny").bounds
+            extents.append(hi - lo)
+    assert np.max(extents[0]) == pytest.approx(0.1, abs=1e-6)
+    assert extents[1][2] == pytest.approx(extents[0][2], abs=1e-6)  # the same height
+    (a, b), c, s = extents[0][:2], np.cos(np.radians(60)), np.sin(np.radians(60))
+    np.testing.assert_allclose(extents[1][:2], [a * c + b * s, a * s + b * c], rtol=1e-3)  # the same block, turned
+
+
 GOOD = """
 name: t
 environment:

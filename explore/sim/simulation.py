@@ -219,18 +219,16 @@ class Simulation:
             if body.size is None:
                 raise BadInput(file, f"{where}.scale", "URDF/SDF bodies take one uniform scale")
         body_id = self._load_file(body, scale, where)
-        p.resetBasePositionAndOrientation(body_id, [0, 0, 0], quat, physicsClientId=self.client)
+        p.resetBasePositionAndOrientation(body_id, [0, 0, 0], [0, 0, 0, 1], physicsClientId=self.client)
         mesh = TriMesh.concatenate(body_visual_meshes(body_id, self.client))
         if len(mesh.triangles) == 0:
             raise BadInput(file, f"{where}.source", "the file has no visual geometry")
-        if body.size is not None:
+        if body.size is not None:  # the largest extent in its own frame, as for a mesh: a turned body stays the same
             lo, hi = mesh.bounds
-            factor = body.size / float(np.max(hi - lo))
             p.removeBody(body_id, physicsClientId=self.client)
-            body_id = self._load_file(body, factor, where)
-            p.resetBasePositionAndOrientation(body_id, [0, 0, 0], quat, physicsClientId=self.client)
-            mesh = TriMesh.concatenate(body_visual_meshes(body_id, self.client))
-        return body_id, mesh
+            body_id = self._load_file(body, body.size / float(np.max(hi - lo)), where)
+        p.resetBasePositionAndOrientation(body_id, [0, 0, 0], quat, physicsClientId=self.client)
+        return body_id, TriMesh.concatenate(body_visual_meshes(body_id, self.client))
 
     def _load_file(self, body: BodySpec, scale: float, where: str) -> int:
         try:
