@@ -26,8 +26,15 @@ from explore.scene.scene_objects import (
     VIEW_BUDGET,
     SceneObject,
     close_holes,
+    distance_to_model,
+    without_vertices,
 )
 from explore.scene.viewing import BEYOND
+from explore.sim import TriMesh
+
+# a modelled surface point this near a recognised neighbour's model at its pose is the neighbour's (depth noise
+# and the pose's error are a few millimetres; the split of touching objects uses 15 mm)
+NEIGHBOUR_SURFACE = 0.005
 
 if TYPE_CHECKING:
     from explore.scene.session import SceneSession
@@ -147,8 +154,7 @@ class ObjectModelling:
         session = scene.modelling_sessions.pop(obj.id, None)
         if session is None or obj.status != MODELLING:
             return None
-        mesh = session.surface.mesh
-        obj.surface_points = np.asarray(session.surface.points).copy()
+        mesh = self._without_neighbours(obj, session.surface)
         obj.coverage_estimate = float(session.surface.coverage_area()) if len(mesh.triangles) else 0.0
         if len(mesh.triangles) < 20:
             obj.status = UNKNOWN
@@ -157,6 +163,24 @@ class ObjectModelling:
         name = scene.database_update.add_to_database(obj, close_holes(mesh), session.n_scans)
         obj.status, obj.model = MODELLED, name
         return name
+
+    def _without_neighbours(self, obj: SceneObject, surface: Any) -> TriMesh:
+        """The modelled surface's mesh without what recognised objects beside it explain (a known duck
+        touching the box being modelled lies in the box's modelling box); sets ``obj.surface_points``."""
+        scene = self.scene
+        mesh, points = surface.mesh, np.asarray(surface.points)
+        meshes = {m.name: m.mesh for m in scene.models}
+        beside, beside_points = np.zeros(len(mesh.vertices), dtype=bool), np.zeros(len(points), dtype=bool)
+        for other in scene.objects:
+            if other is not obj and other.status == RECOGNISED and other.model in meshes and other.pose is not None:
+                model = meshes[other.model]
+                beside |= distance_to_model(model, other.pose, mesh.vertices) < NEIGHBOUR_SURFACE
+                beside_points |= distance_to_model(model, other.pose, points) < NEIGHBOUR_SURFACE
+        obj.surface_points = points[~beside_points].copy()
+        if not beside.any():
+            return mesh
+        obj.note(f"{int(beside_points.sum())} surface points of recognised objects beside it left out")
+        return without_vertices(mesh, beside)
 
     def learn_from_views(self, obj: SceneObject) -> str | None:
         """Model an unknown object from the views already taken (Görner's multi-view object
@@ -174,8 +198,7 @@ class ObjectModelling:
                                voxel_size=0.0035 * f)
         for index in obj.cluster.view_ids:
             surface.integrate(scene.views[index].scan)
-        mesh = surface.mesh
-        obj.surface_points = np.asarray(surface.points).copy()
+        mesh = self._without_neighbours(obj, surface)
         obj.coverage_estimate = float(surface.coverage_area()) if len(mesh.triangles) else 0.0
         if len(mesh.triangles) < 20:
             obj.note("too few points for a mesh")

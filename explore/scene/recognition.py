@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core import Pose, invert, pose_error, reaches, transform_points
+from explore.core import Pose, pose_error, reaches
 from explore.perception import (
     ACCEPT_FROM,
     Q_H_MIN,
@@ -32,6 +32,7 @@ from explore.scene.scene_objects import (
     UNEXPLAINED,
     UNKNOWN,
     SceneObject,
+    distance_to_model,
 )
 
 if TYPE_CHECKING:
@@ -187,6 +188,9 @@ class Recognition:
         obj.note(f"recognised as {name} by {len(fused.members)} agreeing views (no merged hypothesis survived)")
         if obj.recognised_after_views is None:
             obj.recognised_after_views = len(scene.views)
+        if (rest := self._split_residual(obj)) is not None:  # what the model leaves is another object
+            self.recognise(rest)
+            self.validate(rest)
         return True
 
     def _split_residual(self, obj: SceneObject) -> SceneObject | None:
@@ -196,16 +200,8 @@ class Recognition:
         than ``split_distance`` from the model surface at the pose is split off.
         """
         scene = self.scene
-        import open3d as o3d
-
         mesh = next(m.mesh for m in scene.models if m.name == obj.model)
-        raycaster = o3d.t.geometry.RaycastingScene()
-        tmesh = o3d.t.geometry.TriangleMesh()
-        tmesh.vertex.positions = o3d.core.Tensor(mesh.vertices.astype(np.float32))
-        tmesh.triangle.indices = o3d.core.Tensor(mesh.triangles.astype(np.int32))
-        raycaster.add_triangles(tmesh)
-        local = transform_points(invert(obj.pose), obj.cluster.points).astype(np.float32)
-        far = raycaster.compute_distance(o3d.core.Tensor(local)).numpy() > scene.settings.split_distance
+        far = distance_to_model(mesh, obj.pose, obj.cluster.points) > scene.settings.split_distance
         if far.sum() < scene.settings.min_points or far.mean() < scene.settings.split_share:
             return None
         new_id = max(o.id for o in scene.objects) + 1
@@ -215,6 +211,8 @@ class Recognition:
         obj.view_hypotheses, obj.checked_views, obj.view_checks = [], set(), {}
         obj.note(f"{int(far.sum())} points not explained by {obj.model}: split off as object {new_id}")
         rest.note(f"split off object {obj.id}")
+        obj.apart.add(new_id)
+        rest.apart.add(obj.id)
         scene.objects.append(rest)
         return rest
 

@@ -11,14 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, Points3, Pose
+from explore.core import Array, Points3, Pose, invert, transform_points
 from explore.mapping import boundary_loops
 from explore.perception import (
     Cluster,
     FusedPose,
     Hypothesis,
 )
-from explore.sim import Scan, TriMesh
+from explore.sim import RayCaster, Scan, TriMesh
 
 UNEXPLAINED, RECOGNISED, AMBIGUOUS, UNKNOWN, MODELLING, MODELLED = (
     "unexplained", "recognised", "ambiguous", "unknown", "modelling", "modelled")
@@ -86,6 +86,7 @@ class SceneObject:
     surface_points: Points3 | None = None
     recognised_after_views: int | None = None
     events: list[str] = field(default_factory=list)
+    apart: set[int] = field(default_factory=set)  # objects a model told apart from it: never merged back
     _sample: Points3 | None = field(default=None, repr=False)
 
     @property
@@ -113,6 +114,20 @@ class SceneObject:
 
     def note(self, text: str) -> None:
         self.events.append(text)
+
+
+def distance_to_model(mesh: TriMesh, pose: Pose, points: Points3) -> Array:
+    """Distance (n,) of world ``points`` to a model's surface (``mesh``, object frame) placed at ``pose``."""
+    local = transform_points(invert(pose), points)
+    nearest, _ = RayCaster([mesh]).closest(local)
+    return np.linalg.norm(nearest - local, axis=1)
+
+
+def without_vertices(mesh: TriMesh, drop: np.ndarray) -> TriMesh:
+    """The mesh without the triangles that touch a dropped vertex (``drop``: (n,) bool), compacted."""
+    triangles = mesh.triangles[~drop[mesh.triangles].any(axis=1)]
+    used, inverse = np.unique(triangles, return_inverse=True)
+    return TriMesh(mesh.vertices[used], inverse.reshape(-1, 3).astype(np.int32))
 
 
 def close_holes(mesh: TriMesh) -> TriMesh:

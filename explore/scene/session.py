@@ -264,7 +264,8 @@ class SceneSession:
                 obj.extend(cluster.subset(mask))
 
     def _merge_fragments(self) -> None:
-        """Merge objects not yet explained whose points touch (one object seen in pieces)."""
+        """Merge objects not yet explained whose points touch (one object seen in pieces), unless a
+        recognised model split one off the other (an object touching a known one)."""
         from scipy.spatial import cKDTree
 
         tolerance = float(getattr(self.segmenter, "cluster_tolerance", 0.02))
@@ -274,9 +275,12 @@ class SceneSession:
             open_objects = [o for o in self.objects if not o.explained and o.status != MODELLING]
             for i, a in enumerate(open_objects):
                 for b in open_objects[i + 1 :]:
+                    if b.id in a.apart or a.id in b.apart:
+                        continue
                     dist, _ = cKDTree(a.sample()).query(b.sample(), distance_upper_bound=tolerance)
                     if np.any(np.isfinite(dist)):
                         a.extend(b.cluster)
+                        a.apart |= b.apart
                         a.status = UNEXPLAINED
                         a.note(f"merged with object {b.id}")
                         self.objects.remove(b)
