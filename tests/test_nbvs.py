@@ -164,6 +164,36 @@ def test_filter_pipeline_counts_are_monotone(open_world, registry) -> None:
             assert state.unk >= session.min_unknown
 
 
+# cluttered turned about: the robot starts beside the table, where the best-aimed arm pose is level with its top
+TEDDY_ROOM = """name: teddy_room
+environment:
+  - {name: floor, box: [4.0, 4.0, 0.02], position: [0.0, 0.0, -0.01]}
+  - {name: table, box: [0.5, 0.7, 0.70], position: [0.0, 0.0, 0.35]}
+  - {name: chair_1, box: [0.45, 0.45, 0.9], position: [0.6, -0.4, 0.45]}
+  - {name: shelf, box: [0.3, 1.0, 1.4], position: [0.0, 1.0, 0.7]}
+objects:
+  - {name: teddy, source: teddy_vhacd.urdf, size: 0.14, rpy_deg: [90, 0, 30], position: [0.0, 0.0], on_top_of: table}
+region: {min: [-0.2, -0.2, 0.70], max: [0.2, 0.2, 0.92]}
+robot: {plugin: mobile_manipulator, base: [-1.2, 0.6, 0.0, -30.0]}
+sensor: {plugin: depth_camera, params: {width: 160, height: 120, min_range: 0.2, max_range: 1.5}}
+"""
+
+
+def test_the_first_view_looks_from_above_so_that_later_views_can_overlap_it(open_world, registry, tmp_path) -> None:
+    """The arm pose aimed best at the region put the camera 5 cm above the table top: it saw the
+    teddy's lower side (10 % of it, 310 occupied voxels) and no sampled state overlapped that by
+    h = 0.5, so the run ended after its first view. From above the region's top the table is seen
+    too, and hundreds of states pass the registration overlap."""
+    path = tmp_path / "teddy_room.yaml"
+    path.write_text(TEDDY_ROOM)
+    with open_world(path) as sim:
+        session = NBVSSession(sim, registry, expected=False, n_samples=2000, seed=0, top=5)
+        session.initial()
+        assert session.scan_poses[0][2, 3] >= session.region_max[2]
+        session.filter(session.sample())
+    assert session.stages["registration"] >= 50, session.stages
+
+
 def test_two_view_nbvs_run_increases_coverage(open_world, registry) -> None:
     with open_world("cluttered") as sim:
         # the paper's DU row (no noise): the views land where they were chosen
