@@ -72,6 +72,20 @@ class RayCaster:
         return result["points"].numpy().astype(np.float64), result["primitive_normals"].numpy().astype(np.float64)
 
 
+def over_top(mesh: TriMesh, xy: Array, tolerance: float = 1e-3) -> bool:
+    """``xy`` lies over the top of ``mesh``: inside the outline of its vertices within 2 mm of its
+    highest (the whole footprint when those are fewer than a face, e.g. a sphere's pole)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    vertices = mesh.vertices
+    top = vertices[vertices[:, 2] >= vertices[:, 2].max() - 2e-3, :2]
+    try:
+        equations = ConvexHull(top).equations
+    except (QhullError, ValueError):
+        equations = ConvexHull(vertices[:, :2]).equations
+    return bool(np.all(equations[:, :2] @ np.asarray(xy, dtype=float) + equations[:, 2] <= tolerance))
+
+
 def surface_crossings(mesh: TriMesh, other: TriMesh) -> Points3:
     """Where the edges of ``mesh``'s triangles pass through ``other``'s surface (world points):
     two surfaces intersect exactly where an edge of one crosses a triangle of the other."""
@@ -141,9 +155,15 @@ class Simulation:
             self.robot.attach(self)
 
     # -- bodies --------------------------------------------------------------------------
-    def _support_top(self, name: str) -> float:
+    def _support_top(self, name: str, xy: Array, where: str) -> float:
+        """The height of the top of the body ``name`` that a body centred at ``xy`` rests on."""
         for body in self.bodies:
             if body.name == name:
+                if not over_top(body.mesh, xy):
+                    lo, hi = body.mesh.bounds
+                    raise BadInput(str(self.spec.path), f"{where}.position",
+                                   f"[{xy[0]:g}, {xy[1]:g}] is not over the top of {name!r} (it spans x "
+                                   f"{lo[0]:.3g}..{hi[0]:.3g}, y {lo[1]:.3g}..{hi[1]:.3g}): the body would float")
                 return float(body.mesh.vertices[:, 2].max())
         raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
 
@@ -162,7 +182,7 @@ class Simulation:
         center = 0.5 * (lo + hi)
         position = body.position.copy()  # the centre of the body's bounding box
         if body.on is not None:
-            position[2] = self._support_top(body.on) + CONTACT_GAP + (center[2] - lo[2])
+            position[2] = self._support_top(body.on, position[:2], where) + CONTACT_GAP + (center[2] - lo[2])
         if is_file_body:
             p.resetBasePositionAndOrientation(
                 body_id, (position - center).tolist(), quat, physicsClientId=self.client
