@@ -133,8 +133,8 @@ def test_bodies_touching_load_and_bodies_passing_through_each_other_do_not(open_
     assert np.ptp(crossing, axis=0).max() == pytest.approx(0.04, abs=1e-6)
     moved = type(cube)(cube.vertices + [0.03, 0.0, 0.0], cube.triangles)
     assert depth_behind(moved, cube) == pytest.approx(0.01, abs=1e-6)  # its left face 1 cm inside
-    pair = GOOD.replace("region:", "  - {name: cube, box: [0.04, 0.04, 0.04], position: [0.0, %s], on_top_of: pedestal}"
-                        "\nregion:")
+    pair = GOOD.replace("box: [0.1, 0.1, 0.5]", "box: [0.3, 0.3, 0.5]").replace(
+        "region:", "  - {name: cube, box: [0.04, 0.04, 0.04], position: [0.0, %s], on_top_of: pedestal}\nregion:")
     path = tmp_path / "pair.yaml"
     path.write_text(pair % "0.09")  # beside the bunny (0.1 m long), not in it
     open_world(load_world_spec(path)).close()
