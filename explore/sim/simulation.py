@@ -136,7 +136,11 @@ class Simulation:
         self.sensor = None
         self.robot = None
         if registry is not None:
-            self.attach_plugins(registry)
+            try:
+                self.attach_plugins(registry)
+            except BaseException:
+                self.close()
+                raise
 
     # -- plugins -------------------------------------------------------------------------
     def attach_plugins(
@@ -153,6 +157,10 @@ class Simulation:
         self.robot = registry.create("robot", name or registry.default("robot", "world")[0], params, file, "robot")
         if hasattr(self.robot, "attach"):
             self.robot.attach(self)
+        if self.spec.robot.base is not None and hasattr(self.robot, "collisions"):
+            inside = sorted({name for name in self.robot.collisions(self.robot.q, "true", 0.0) if name != "self"})
+            if inside:
+                raise BadInput(file, "robot.base", f"the robot starts inside {', '.join(map(repr, inside))}")
 
     # -- bodies --------------------------------------------------------------------------
     def _support_top(self, name: str, xy: Array, where: str) -> float:

@@ -88,6 +88,8 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "objects_intersect": ("intersects objects[0] (bunny)",
                           [("region:", "  - {name: block, box: [0.06, 0.06, 0.06], position: [0.0, 0.0], on_top_of: pedestal}\nregion:")]),
     "robot_unknown": ("unknown robot 'roomba'", [("plugin: free_flyer", "plugin: roomba")]),
+    "robot_starts_inside": ("robot.base: the robot starts inside 'bunny', 'pedestal'",
+                            [("plugin: free_flyer", "plugin: arm\n  base: [0.0, 0.0, 0.0, 0.0]")]),
     "robot_unknown_param": ("unknown parameter", [("plugin: free_flyer", "plugin: free_flyer\n  params: {wheels: 4}")]),
     "robot_params_list": ("expected a mapping", [("plugin: free_flyer", "plugin: free_flyer\n  params: [1, 2]")]),
     "sensor_missing": ("sensor: missing", [("sensor:\n  plugin: laser_striper\n", "")]),
