@@ -586,3 +586,36 @@ def test_real_model_object_grid_matches_its_runs_and_a_rerun(tmp_path) -> None:
     alone = json.loads((tmp_path / "again" / "metrics.json").read_text())
     assert alone["coverage_per_scan"] == pytest.approx(cell["coverage_per_scan"], abs=1e-6)
     assert alone["path_length_m"] == pytest.approx(cell["path_length_m"], abs=1e-6)
+
+
+KNOWN_DUCK = """name: known_duck
+environment:
+  - {name: table, source: table/table.urdf, position: [0.0, 0.0, 0.3125]}
+objects:
+  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.0, 0.0], on_top_of: table, known: true}
+region: {min: [-0.2, -0.2, 0.625], max: [0.2, 0.2, 0.8]}
+robot: {plugin: free_flyer}
+sensor: {plugin: depth_camera, params: {width: 320, height: 240, min_range: 0.3, max_range: 2.0}}
+overview: {eye: [0.0, -0.8, 1.3], target: [0.0, 0.0, 0.65]}
+"""
+
+
+def test_scene_runs_of_a_grid_each_have_their_own_database(tmp_path, monkeypatch) -> None:
+    """Two seeds of a scene tree at once: each run seeds and fills an object database in its own folder.
+    They used to share the user's default ``runs/objects.db`` (in the folder compare was started from):
+    each run saw the models the others had learned, in whatever order they ran, and two runs seeding
+    the same known object at once crashed one of them ("an object of this name exists")."""
+    from explore.perception import ObjectDatabase
+    from explore.runtime import Grid, compare, make_registry
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("EXPLORE_DB", str(tmp_path / "mine.db"))
+    world = tmp_path / "known_duck.yaml"
+    world.write_text(KNOWN_DUCK)
+    executor = make_registry().create("executor", "local", {"jobs": 2})
+    rows = compare(Grid(tree="scene_exploration", worlds=[str(world)], seeds=[0, 1]), tmp_path / "out", executor)
+    assert [r["status"] for r in rows] == ["success", "success"], [r["reason"] for r in rows]
+    for row in rows:
+        with ObjectDatabase.open(tmp_path / "out" / "runs" / row["run_id"] / "objects.db") as db:
+            assert db.names() == ["duck"]
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "mine.db").exists()

@@ -412,12 +412,20 @@ class ObjectDatabase:
             if only_known and not body.known:
                 continue
             world_T_model, mesh = object_frame(body)
-            if body.name not in self:
-                self.add(body.name, mesh, provenance="given", world=sim.spec.name)
-                bbox = np.vstack(body.mesh.bounds)
-                self.set_location(body.name, sim.spec.name, world_T_model, bbox)
+            if body.name not in self and self._seed(body.name, mesh, sim.spec.name):
+                self.set_location(body.name, sim.spec.name, world_T_model, np.vstack(body.mesh.bounds))
             poses[body.name] = world_T_model
         return poses
+
+    def _seed(self, name: str, mesh: TriMesh, world: str) -> bool:
+        """Add a known object; False when another run sharing the database added it meanwhile."""
+        try:
+            self.add(name, mesh, provenance="given", world=world)
+        except BadInput:
+            if name not in self:
+                raise
+            return False
+        return True
 
 
 def object_frame(body: GroundTruthBody | TriMesh) -> tuple[Pose, TriMesh]:

@@ -46,7 +46,7 @@ def _prepare_run_dir(spec: RunSpec) -> None:
 
 
 def worker_env(spec: RunSpec) -> dict[str, str]:
-    """The environment of a run's process: identical on every executor."""
+    """The environment of a run's process: identical on every executor, its object database its own."""
     env = dict(os.environ)
     for var in THREAD_VARS:
         env[var] = str(spec.threads)
@@ -54,6 +54,9 @@ def worker_env(spec: RunSpec) -> dict[str, str]:
     env["MPLBACKEND"] = "Agg"
     env.setdefault("PYTHONWARNINGS", "ignore")
     env["EXPLORE_COMPARE_PARENT"] = str(os.getpid())
+    # a run's own object database (a scene tree's default): runs that shared the user's learned each other's
+    # models in whatever order they ran, raced to seed the same known objects, and filled the user's database
+    env["EXPLORE_DB"] = str(spec.path / "objects.db")
     return env
 
 
