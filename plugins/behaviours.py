@@ -98,9 +98,9 @@ class PlanMotion(ExploreBehaviour):
     params = (Param("initial", bool, False, "", "plan the initial scan instead of the selected candidate"),)
 
     def work(self) -> Outcome:
-        session = self.read("modelling")
+        session = self.need("modelling")
         before = len(session.motion.plans)
-        plan = session.plan_initial() if self.p["initial"] else session.plan_best(self.read("candidate"))
+        plan = session.plan_initial() if self.p["initial"] else session.plan_best(self.need("candidate"))
         for record in session.motion.plans[before:]:
             self.context.trace("decision", what="plan", source=record.source, verdict=record.verdict,
                                seconds=record.seconds, planner=record.planner)
@@ -127,8 +127,8 @@ class ExecuteMotion(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        session = self.read("modelling")
-        run = session.execute(self.read("plan"))
+        session = self.need("modelling")
+        run = session.execute(self.need("plan"))
         if run is None:
             return success("placed at the scan start")
         _trace_motion(self, session, run)
@@ -146,9 +146,9 @@ class AcquireScan(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        session = self.read("modelling")
+        session = self.need("modelling")
         motions = len(session.motion.motions)
-        scan, scan_length, _ = session.acquire(self.read("plan"))
+        scan, scan_length, _ = session.acquire(self.need("plan"))
         if len(session.motion.motions) > motions:
             _trace_motion(self, session, None)
         if session.status == "collided":
@@ -190,14 +190,14 @@ class RegisterScan(ExploreBehaviour):
     def work(self) -> Outcome:
         if not self.p["enabled"]:
             return success("disabled")
-        session = self.read("modelling")
+        session = self.need("modelling")
         registrar = self.context.registry.create(
             "registrar", "icp",
             {"radius": self.p["radius"], "iterations": self.p["iterations"],
              "normal_gate_deg": self.p["normal_gate_deg"], "method": self.p["method"]},
             "register_scan", "params",
         )
-        scan = self.read("scan")
+        scan = self.need("scan")
         corrected, result = session.register(scan, registrar, self.p["min_fitness"], self.p["max_shift"],
                                              self.p["max_angle_deg"])
         if result is None:
@@ -222,8 +222,8 @@ class IntegrateScan(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        session = self.read("modelling")
-        stats = session.integrate(self.read("scan"))
+        session = self.need("modelling")
+        stats = session.integrate(self.need("scan"))
         outputs = self.context.state.get("modelling")
         if outputs is not None:
             outputs.after_integration()
@@ -247,7 +247,7 @@ class GenerateCandidates(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        count = self.read("modelling").generate()
+        count = self.need("modelling").generate()
         return success(f"{count} candidates")
 
 
@@ -260,7 +260,7 @@ class SelectNBV(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        session = self.read("modelling")
+        session = self.need("modelling")
         scored = list(session.stack)
         candidate = session.select()  # scores every candidate of the stack in place
         self.write("candidate", candidate)
@@ -292,7 +292,7 @@ class CheckTermination(ExploreBehaviour):
     def work(self) -> Outcome:
         if self.read("done"):
             return success(self.read("reason") or "done")
-        session = self.read("modelling")
+        session = self.need("modelling")
         decision = session.terminate()
         self.context.trace("decision", what="termination", action=decision.action, reason=decision.reason,
                            margin=decision.margin)

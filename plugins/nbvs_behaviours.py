@@ -184,7 +184,7 @@ class TreeNBVS:
 
 
 def _session(behaviour: ExploreBehaviour) -> TreeNBVS:
-    return behaviour.read("nbvs")
+    return behaviour.need("nbvs")
 
 
 class StartNBVS(ExploreBehaviour):
@@ -290,7 +290,7 @@ class NBVSFilter(ExploreBehaviour):
 
     def work(self) -> Outcome:
         session = _session(self)
-        states = session.filter(self.read("states"))
+        states = session.filter(self.need("states"))
         self.write("states", states)
         self.write("chosen", False)
         stages = session.session.stages
@@ -308,7 +308,7 @@ class NBVSPlan(ExploreBehaviour):
 
     def work(self) -> Outcome:
         session = _session(self)
-        states = self.read("states")
+        states = self.need("states")
         planned = session.plan(states)
         self.write("states", planned)
         return success(f"{len(planned)} of {len(states)} planned")  # the time is in the metrics (stage times)
@@ -324,7 +324,7 @@ class NBVSScore(ExploreBehaviour):
 
     def work(self) -> Outcome:
         session = _session(self)
-        states = session.score(self.read("states"))
+        states = session.score(self.need("states"))
         self.write("states", states)
         feasible = sum(1 for s in states if s.score > 0)
         return success(f"{feasible} of {len(states)} feasible")
@@ -370,7 +370,7 @@ class NBVSExecute(ExploreBehaviour):
 
     def work(self) -> Outcome:
         session = _session(self)
-        run = session.execute(self.read("candidate"))
+        run = session.execute(self.need("candidate"))
         self.context.trace("motion", steps=len(run.controls), collided=run.collided,
                            bodies=[list(e.bodies) for e in run.collisions])
         if run.collided and session.session.status == "collided":  # the mission fails, as the paper counts it
@@ -388,7 +388,7 @@ class NBVSAcquire(ExploreBehaviour):
     blocking = True
 
     def work(self) -> Outcome:
-        scan = _session(self).acquire(self.read("pose"))
+        scan = _session(self).acquire(self.need("pose"))
         self.write("scan", scan)
         hits = int(scan.hits.sum())
         self.context.trace("scan", index=len(_session(self).session.records) + 1, beams=len(scan), returns=hits)
@@ -404,7 +404,7 @@ class NBVSIntegrate(ExploreBehaviour):
 
     def work(self) -> Outcome:
         session = _session(self)
-        record = session.integrate(self.read("scan"))
+        record = session.integrate(self.need("scan"))
         line = "  ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
                          for k, v in session.live_stats().items())
         self.context.status_line = line

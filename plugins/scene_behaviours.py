@@ -134,7 +134,7 @@ def save_scene_png(session: Any, path: Path) -> None:
 
 
 def _scene(behaviour: ExploreBehaviour) -> Any:
-    return behaviour.read("scene").session
+    return behaviour.need("scene").session
 
 
 def _to_model(behaviour: ExploreBehaviour, ids: list[int]) -> None:
@@ -485,7 +485,7 @@ class SurroundTable(ExploreBehaviour):
 
         from explore.scene import known_tables, surround
 
-        run = self.read("scene")
+        run = self.need("scene")
         scene = run.session
         tables = known_tables(scene.sim)
         table = self.read("table")
@@ -517,7 +517,7 @@ class ListTables(ExploreBehaviour):
 
 
 def _status(behaviour: ExploreBehaviour) -> str:
-    stats = behaviour.read("scene").live_stats()
+    stats = behaviour.need("scene").live_stats()
     return "  ".join(f"{k} {v}" for k, v in stats.items())
 
 

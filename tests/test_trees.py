@@ -169,6 +169,23 @@ root:
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["reason"] == "Grasp: gripper on fire"
 
 
+def test_a_step_run_before_the_one_that_writes_its_input_says_which_does(tmp_path, registry) -> None:
+    """A user's tree that recognises before it starts the scene failed with "AttributeError: 'NoneType'
+    object has no attribute 'session'"; now the step names the key and the behaviours that write it."""
+    text = """
+root:
+  sequence: Mission
+  children:
+    - behaviour: recognise_objects
+    - behaviour: start_scene
+"""
+    path = _write(tmp_path, "order.yaml", text)
+    result = execute(RunConfig(tree=str(path), world="scene_small", out=tmp_path / "run"), registry)
+    assert result.status == "failure"
+    assert result.reason == ("recognise_objects: needs 'scene', which no step before it has written "
+                             "(written by start_scene)")
+
+
 def test_run_refuses_to_overwrite_a_run(tmp_path, reg) -> None:
     path = _write(tmp_path, "loop.yaml", LOOP)
     execute(RunConfig(tree=str(path), world="bunny_pedestal", out=tmp_path / "run"), reg)

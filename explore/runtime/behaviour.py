@@ -38,6 +38,10 @@ def failure(reason: str) -> Outcome:
     return Outcome(Status.FAILURE, reason)
 
 
+class MissingInput(Exception):
+    """A blackboard key a behaviour needs that no step before it has written."""
+
+
 class ExploreBehaviour(py_trees.behaviour.Behaviour):
     """Base of explore's behaviour plugins (kind ``behaviour``)."""
 
@@ -108,6 +112,8 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
             outcome = self.work()
         except BadInput:
             raise
+        except MissingInput as missing:
+            return failure(self._missing(str(missing)))
         except Exception as error:  # noqa: BLE001 - a failing step fails the node with its reason
             self.context.trace(
                 "exception", node=self.name, error=f"{type(error).__name__}: {error}", traceback=traceback.format_exc()
@@ -127,10 +133,27 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
 
     # -- blackboard helpers ----------------------------------------------------------------------
     def read(self, key: str, default: Any = None) -> Any:
+        """The value of a declared blackboard key, ``default`` when none has been written."""
         try:
             return self.bb.get(key)
         except KeyError:
             return default
 
+    def need(self, key: str) -> Any:
+        """A key this behaviour reads that an earlier step must have written: when none has, the step
+        fails naming the behaviours that write it (a tree that runs them later or not at all)."""
+        value = self.read(key)
+        if value is None:
+            raise MissingInput(key)
+        return value
+
+    def _missing(self, key: str) -> str:
+        registry = getattr(self.context, "registry", None)
+        writers = [info.name for info in (registry.of_kind("behaviour") if registry is not None else [])
+                   if key in getattr(info.factory, "writes", ())]
+        return (f"needs '{key}', which no step before it has written"
+                + (f" (written by {', '.join(writers)})" if writers else ""))
+
     def write(self, key: str, value: Any) -> None:
+        """Set a declared blackboard key."""
         self.bb.set(key, value, overwrite=True)
