@@ -194,6 +194,14 @@ def test_the_first_view_looks_from_above_so_that_later_views_can_overlap_it(open
     assert session.stages["registration"] >= 50, session.stages
 
 
+def test_view_state_planning_refuses_a_line_sensor(open_world, registry) -> None:
+    """A laser striper takes one stripe per view: the run ended `no_candidates` at coverage 0."""
+    from explore.core import BadInput
+
+    with open_world("bunny_pedestal") as sim, pytest.raises(BadInput, match="sensor: view/state planning takes single"):
+        NBVSSession(sim, registry)
+
+
 def test_two_view_nbvs_run_increases_coverage(open_world, registry) -> None:
     with open_world("cluttered") as sim:
         # the paper's DU row (no noise): the views land where they were chosen

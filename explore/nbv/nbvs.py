@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Pose, validate_params, wrap_angle
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, BadInput, Pose, validate_params, wrap_angle
 from explore.motion import Capability, Execution, MotionProblem, execute_following
 from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import PlanningContext
@@ -117,6 +117,9 @@ class NBVSSession(Reporting, Scoring, StateSampling):
             GroundTruthMetrics,  # noqa: F401 - fail early if metrics are missing
         )
 
+        if sim.sensor.geometry != "area":  # one stripe per view: nothing to plan with
+            raise BadInput(str(sim.spec.path), "sensor", f"view/state planning takes single views of an area sensor "
+                           f"(a depth camera); {sim.sensor.name} sweeps a line along a scan path")
         self.sim, self.registry, self.robot, self.sensor = sim, registry, sim.robot, sim.sensor
         self.progress: Callable[[str], None] = _quiet  # what a long step is doing (a run shows it)
         self.expected, self.k = bool(expected), int(k)
