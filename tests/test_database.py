@@ -184,6 +184,11 @@ def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     assert '"provenance": "given"' in capsys.readouterr().out
     assert main(["db", "export", "cube", "--out", str(tmp_path / "out.obj"), "--db", db]) == 0
     assert np.allclose(np.ptp(read_mesh(tmp_path / "out.obj").vertices, axis=0), [0.05, 0.025, 0.04])
+    (tmp_path / "mine.ply").write_text("the user's own file\n")  # kept unless --replace
+    assert main(["db", "export", "cube", "--out", str(tmp_path / "mine.ply"), "--db", db]) == 2
+    assert (tmp_path / "mine.ply").read_text() == "the user's own file\n"
+    assert main(["db", "export", "cube", "--out", str(tmp_path / "mine.ply"), "--db", db, "--replace"]) == 0
+    assert len(read_mesh(tmp_path / "mine.ply").vertices) == 8
     capsys.readouterr()
     # bad input: one line on stderr, exit code 2
     for argv in (
