@@ -361,6 +361,29 @@ def test_session_refuses_bad_plugins(open_world, registry, tmp_path):
             SceneSession(sim, registry, db, recognizer="no_such_recogniser")
 
 
+def test_a_model_whose_name_another_run_took_meanwhile_gets_the_next(open_world, registry, tmp_path, monkeypatch):
+    """Two runs sharing a database (``explore compare --set start_scene.db=...``) both picked
+    ``touch-3`` for their new models; the second add failed and crashed its run."""
+    from explore.perception import Cluster
+    from explore.scene.database_update import DatabaseUpdate
+    from explore.scene.scene_objects import SceneObject
+    from explore.sim import box_mesh
+
+    with open_world(_world(tmp_path, EMPTY)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+        scene = SceneSession(sim, registry, db)
+        db.add("empty_table-1", box_mesh(np.array([0.02, 0.02, 0.02])), provenance="modelled")
+        names = iter(["empty_table-1"])  # the first free name, as this run saw it before the other's add
+        real = DatabaseUpdate._new_name
+        monkeypatch.setattr(DatabaseUpdate, "_new_name", lambda self: next(names, None) or real(self))
+        mesh = box_mesh(np.array([0.04, 0.05, 0.06]))
+        mesh = type(mesh)(mesh.vertices + [0.0, 0.0, 0.7], mesh.triangles)
+        n = len(mesh.vertices)
+        obj = SceneObject(0, Cluster(0, mesh.vertices, np.zeros((n, 3)), np.zeros(n, int), np.arange(n)))
+        obj.coverage_estimate = 0.5
+        name = scene.database_update.add_to_database(obj, mesh, 3)
+        assert name == "empty_table-2" and sorted(db.names()) == ["empty_table-1", "empty_table-2"]
+
+
 def test_close_holes_caps_an_open_box():
     from explore.mapping import border_edges
     from explore.sim import box_mesh

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from explore.core import BadInput
 from explore.perception import (
     Model,
 )
@@ -45,8 +46,15 @@ class DatabaseUpdate:
         chosen += [r for r in (PPFRecognizer(), VFHRecognizer()) if r.descriptor_kind not in kinds]
         descriptors = model_descriptors(Model(name, mesh), chosen)
         coverage = float(np.clip(obj.coverage_estimate, 0.0, 1.0))
-        scene.db.add(name, mesh, provenance="modelled", world=scene.sim.spec.name, run=scene.settings.run_name,
-                     scans=int(scans), coverage=coverage, descriptors=descriptors)
+        while True:
+            try:
+                scene.db.add(name, mesh, provenance="modelled", world=scene.sim.spec.name, run=scene.settings.run_name,
+                             scans=int(scans), coverage=coverage, descriptors=descriptors)
+                break
+            except BadInput:
+                if name not in scene.db:
+                    raise
+                name = self._new_name()  # another run writing the database took this name meanwhile
         scene.db.set_location(name, scene.sim.spec.name, world_T_model, np.vstack(world_mesh.bounds))
         obj.pose = world_T_model
         scene.added.append(name)
