@@ -48,7 +48,7 @@ class StateSampling:
         robot, q0 = self.robot, self.q.copy()
         centre = 0.5 * (self.region_min + self.region_max)
         joints = robot.joint_dofs
-        best, best_q = -np.inf, q0
+        best, best_q = (False, -np.inf), q0  # (from above the region's top, alignment with the centre)
         for _ in range(attempts):
             q = q0.copy()
             q[joints] = self.rng_sample.uniform(robot.lower[joints], robot.upper[joints])
@@ -57,14 +57,14 @@ class StateSampling:
             dist = float(np.linalg.norm(ray))
             if not 0.4 <= dist <= 1.2:
                 continue
-            value = float(ray @ pose[:3, 2]) / dist + 2.0 * float(pose[2, 3] >= self.region_max[2])  # above first
+            value = (bool(pose[2, 3] >= self.region_max[2]), float(ray @ pose[:3, 2]) / dist)
             if value <= best:
                 continue
             if not self._sees_region(pose[:3, 3]):
                 continue
             if not robot.in_collision(q, "known") and np.all(self.obstacles.clearance(robot.link_points(q)) >= 0.0):
                 best, best_q = value, q
-        if best == -np.inf:
+        if best[1] == -np.inf:
             self.status, self.reason, self.outcome = "failed", \
                 f"no first view sees the region ({attempts} arm samples tried)", FAILURE
         self.q = best_q

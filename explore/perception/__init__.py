@@ -13,7 +13,7 @@ from explore.perception.contracts import (
     Segmenter,
     require_role,
 )
-from explore.perception.database import ObjectDatabase, default_path, object_frame
+from explore.perception.database import NameTaken, ObjectDatabase, default_path, object_frame
 from explore.perception.depth_filters import (
     DepthProcessing,
     depth_image,
@@ -26,7 +26,15 @@ from explore.perception.depth_filters import (
 )
 from explore.perception.fpfh import FPFHRansacRecognizer
 from explore.perception.fusion import FusedPose, fuse_poses
-from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model, accepted, rivals, surface_distances
+from explore.perception.hypotheses import (
+    Q_H_MIN,
+    Hypothesis,
+    Model,
+    accepted,
+    distance_to_model,
+    rivals,
+    surface_distances,
+)
 from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
 from explore.perception.incremental_graph import IncrementalPoseGraph, LikelihoodField
 from explore.perception.model_data import ModelCloud, model_cloud
@@ -76,6 +84,7 @@ __all__ = [
     "LikelihoodField",
     "Model",
     "OCCUPIED_FROM",
+    "NameTaken",
     "ObjectDatabase",
     "PPFRecognizer",
     "PlaneClusterSegmenter",
@@ -126,5 +135,6 @@ __all__ = [
     "scan_points_and_normals",
     "sigmas6",
     "surface_distances",
+    "distance_to_model",
     "vfh_signature",
 ]

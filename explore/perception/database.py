@@ -58,6 +58,11 @@ DEFAULT_DB = "runs/objects.db"  # beside the runs that fill it, not in whatever 
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}$")
 
 
+class NameTaken(BadInput):
+    """:meth:`ObjectDatabase.add` of a name the database already holds (another run sharing it may
+    have added it since the caller looked)."""
+
+
 @dataclass(frozen=True)
 class ObjectRecord:
     """One row of ``objects`` (the mesh is loaded by :meth:`ObjectDatabase.get`)."""
@@ -250,7 +255,7 @@ class ObjectDatabase:
                 row = con.execute("SELECT id, mesh_file FROM objects WHERE name = ?", (name,)).fetchone()
                 if row is not None:
                     if not replace:
-                        raise BadInput(str(self.path), name, "an object of this name exists (remove it first)")
+                        raise NameTaken(str(self.path), name, "an object of this name exists (remove it first)")
                     old_file = row[1]
                     con.execute("DELETE FROM objects WHERE id = ?", (row[0],))
                 cursor = con.execute(
@@ -421,9 +426,7 @@ class ObjectDatabase:
         """Add a known object; False when another run sharing the database added it meanwhile."""
         try:
             self.add(name, mesh, provenance="given", world=world)
-        except BadInput:
-            if name not in self:
-                raise
+        except NameTaken:
             return False
         return True
 

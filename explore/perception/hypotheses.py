@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, Pose, pose_error, reaches
+from explore.core import Array, Points3, Pose, pose_error, reaches
 from explore.sim import Scan, TriMesh
 
 ScanSource = Scan | Sequence[Scan] | Mapping[int, Scan]
@@ -100,14 +100,18 @@ def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 
     surface in the same place, such as a plain cube turned by 90 degrees. Point-to-mesh
     distances (Open3D ``RaycastingScene.compute_distance``), so sampling adds no error.
     """
-    import open3d as o3d
-
     from explore.mapping import sample_surface
 
     points, _ = sample_surface(mesh, max(mesh.area(), 1e-12) / samples, seed=1)
-    at_a = points @ pose_a[:3, :3].T + pose_a[:3, 3]
-    scene = raycasting_scene(mesh if onto is None else onto, pose_b)
-    return scene.compute_distance(o3d.core.Tensor(at_a.astype(np.float32))).numpy().astype(np.float64)
+    return distance_to_model(mesh if onto is None else onto, pose_b, points @ pose_a[:3, :3].T + pose_a[:3, 3])
+
+
+def distance_to_model(mesh: TriMesh, pose: Pose, points: Points3) -> Array:
+    """Distance (m, (n,)) of world ``points`` to a model's surface (``mesh``, object frame) placed at ``pose``."""
+    import open3d as o3d
+
+    query = o3d.core.Tensor(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+    return raycasting_scene(mesh, pose).compute_distance(query).numpy().astype(np.float64)
 
 
 def rivals(

@@ -9,9 +9,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core import BadInput
 from explore.perception import (
     Model,
+    NameTaken,
 )
 from explore.scene.scene_objects import (
     RECOGNISED,
@@ -51,9 +51,7 @@ class DatabaseUpdate:
                 scene.db.add(name, mesh, provenance="modelled", world=scene.sim.spec.name, run=scene.settings.run_name,
                              scans=int(scans), coverage=coverage, descriptors=descriptors)
                 break
-            except BadInput:
-                if name not in scene.db:
-                    raise
+            except NameTaken:
                 name = self._new_name()  # another run writing the database took this name meanwhile
         scene.db.set_location(name, scene.sim.spec.name, world_T_model, np.vstack(world_mesh.bounds))
         obj.pose = world_T_model

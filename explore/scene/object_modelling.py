@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import BUDGET, SUCCESS, Array
+from explore.perception import distance_to_model
 from explore.scene.motion import target_start
 from explore.scene.scene_objects import (
     AMBIGUOUS,
@@ -26,7 +27,6 @@ from explore.scene.scene_objects import (
     VIEW_BUDGET,
     SceneObject,
     close_holes,
-    distance_to_model,
     without_vertices,
 )
 from explore.scene.viewing import BEYOND
@@ -169,18 +169,26 @@ class ObjectModelling:
         touching the box being modelled lies in the box's modelling box); sets ``obj.surface_points``."""
         scene = self.scene
         mesh, points = surface.mesh, np.asarray(surface.points)
-        meshes = {m.name: m.mesh for m in scene.models}
-        beside, beside_points = np.zeros(len(mesh.vertices), dtype=bool), np.zeros(len(points), dtype=bool)
-        for other in scene.objects:
-            if other is not obj and other.status == RECOGNISED and other.model in meshes and other.pose is not None:
-                model = meshes[other.model]
-                beside |= distance_to_model(model, other.pose, mesh.vertices) < NEIGHBOUR_SURFACE
-                beside_points |= distance_to_model(model, other.pose, points) < NEIGHBOUR_SURFACE
-        obj.surface_points = points[~beside_points].copy()
-        if not beside.any():
+        both = np.vstack([mesh.vertices, points])  # one distance query per neighbour for the two
+        if len(both) == 0:
+            obj.surface_points = points.copy()
             return mesh
-        obj.note(f"{int(beside_points.sum())} surface points of recognised objects beside it left out")
-        return without_vertices(mesh, beside)
+        margin = scene.settings.box_margin  # a neighbour is only partly seen: its points near, not on, the surface
+        lo, hi = both.min(axis=0) - margin, both.max(axis=0) + margin
+        meshes = {m.name: m.mesh for m in scene.models}
+        beside = np.zeros(len(both), dtype=bool)
+        for other in scene.objects:
+            if other is obj or other.status != RECOGNISED or other.model not in meshes or other.pose is None:
+                continue
+            near_lo, near_hi = other.cluster.aabb
+            if np.all(near_hi >= lo) and np.all(near_lo <= hi):
+                beside |= distance_to_model(meshes[other.model], other.pose, both) < NEIGHBOUR_SURFACE
+        on_mesh, on_points = beside[: len(mesh.vertices)], beside[len(mesh.vertices):]
+        obj.surface_points = points[~on_points].copy()
+        if not on_mesh.any():
+            return mesh
+        obj.note(f"{int(on_points.sum())} surface points of recognised objects beside it left out")
+        return without_vertices(mesh, on_mesh)
 
     def learn_from_views(self, obj: SceneObject) -> str | None:
         """Model an unknown object from the views already taken (Görner's multi-view object

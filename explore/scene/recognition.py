@@ -20,6 +20,7 @@ from explore.perception import (
     FusedPose,
     Hypothesis,
     ModelCloud,
+    distance_to_model,
     fuse_poses,
     icp_refine,
     inlier_fraction,
@@ -32,7 +33,6 @@ from explore.scene.scene_objects import (
     UNEXPLAINED,
     UNKNOWN,
     SceneObject,
-    distance_to_model,
 )
 
 if TYPE_CHECKING:

@@ -11,14 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, Points3, Pose, invert, transform_points
+from explore.core import Array, Points3, Pose
 from explore.mapping import boundary_loops
 from explore.perception import (
     Cluster,
     FusedPose,
     Hypothesis,
 )
-from explore.sim import RayCaster, Scan, TriMesh
+from explore.sim import Scan, TriMesh
 
 UNEXPLAINED, RECOGNISED, AMBIGUOUS, UNKNOWN, MODELLING, MODELLED = (
     "unexplained", "recognised", "ambiguous", "unknown", "modelling", "modelled")
@@ -114,13 +114,6 @@ class SceneObject:
 
     def note(self, text: str) -> None:
         self.events.append(text)
-
-
-def distance_to_model(mesh: TriMesh, pose: Pose, points: Points3) -> Array:
-    """Distance (n,) of world ``points`` to a model's surface (``mesh``, object frame) placed at ``pose``."""
-    local = transform_points(invert(pose), points)
-    nearest, _ = RayCaster([mesh]).closest(local)
-    return np.linalg.norm(nearest - local, axis=1)
 
 
 def without_vertices(mesh: TriMesh, drop: np.ndarray) -> TriMesh:
