@@ -338,6 +338,19 @@ def test_dark_surfaces_return_in_proportion_to_their_grey_level(open_world, regi
         assert abs(kept[mask].sum() - p.sum()) <= 4 * np.sqrt((p * (1 - p)).sum()) + 1, grey
 
 
+def test_a_one_pixel_kinect_camera_measures_with_its_bias(wall_sim, registry) -> None:
+    """A 1 x 1 image has no spread to normalise the bias field by: its bias is one unit-normal
+    draw per frame, so the residuals over many frames keep a total of about sqrt(2) sigma."""
+    camera = registry.create("sensor", "depth_camera", {"profile": "kinect", "width": 1, "height": 1,
+                                                        "max_range": 3.0, "disparity_step": 0.0})
+    pose = look_at([0.0, 0.0, 1.5], [0.0, 0.0, 0.0])
+    rng = np.random.default_rng(3)
+    scans = [camera.acquire(wall_sim, pose, rng) for _ in range(400)]
+    assert all(scan.hits.all() for scan in scans)
+    residual = np.array([scan.ranges[0] - 1.5 for scan in scans]) / sigma_kinect(np.array(1.5))
+    assert residual.std() == pytest.approx(np.sqrt(1.0 + camera.bias_sigma**2 + camera.patch_sigma**2), rel=0.15)
+
+
 def test_correlated_patches_follow_the_gaussian_correlation(wall_sim, registry) -> None:
     """patch_sigma 1, patch_px 3 on top of the white noise: residuals of pixels L apart correlate
     by exp(-L^2 / 36) / 2, their standard deviation is sqrt(2) sigma(d), and the sensor reports

@@ -117,4 +117,6 @@ def smooth_field(frames: int, rows: int, cols: int, rng: np.random.Generator, ce
 
     grid = rng.normal(size=(frames, cells + 1, cells + 1)).astype(np.float32)
     field = np.array([cv2.resize(g, (cols, rows), interpolation=cv2.INTER_LINEAR) for g in grid], dtype=float)
-    return field / field.std(axis=(1, 2), keepdims=True)
+    spread = field.std(axis=(1, 2), keepdims=True)
+    # a one-pixel image has no spread: its value is one draw of the grid's unit normal already
+    return field / np.where(spread > 0.0, spread, 1.0)
