@@ -19,6 +19,7 @@ from explore.sim.meshes import TriMesh, read_mesh
 from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
 
 CONTACT_GAP = 5e-4  # m between a body and the body it rests on
+MIN_OBJECT_EXTENT = 1e-3  # m: the finest sensor here (the striper) samples about 0.6 mm apart
 # bodies whose surfaces cross over less than OVERLAP_TOLERANCE, or with no point deeper than
 # PENETRATION_TOLERANCE in the other, touch (a ball resting in a bowl set by hand); else they intersect
 OVERLAP_TOLERANCE = 0.005  # m
@@ -187,6 +188,11 @@ class Simulation:
         else:
             mesh = self._primitive_or_mesh(body, where).transformed(pose_from(np.zeros(3), rotation))
         lo, hi = mesh.bounds
+        extent = float(np.max(hi - lo))
+        if is_object and extent < MIN_OBJECT_EXTENT:
+            raise BadInput(str(self.spec.path), f"{where}.size" if body.size is not None else where,
+                           f"the object is {extent:.3g} m across: below {MIN_OBJECT_EXTENT * 1000:g} mm, "
+                           "no range sensor here resolves it")
         center = 0.5 * (lo + hi)
         position = body.position.copy()  # the centre of the body's bounding box
         if body.on is not None:

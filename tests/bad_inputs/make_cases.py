@@ -62,6 +62,7 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "cylinder_no_radius": ("radius: missing", [("box: [0.10, 0.10, 0.50]", "cylinder: {length: 0.5}")]),
     "cylinder_unknown": ("unknown field", [("box: [0.10, 0.10, 0.50]", "cylinder: {radius: 0.1, length: 0.5, r: 1}")]),
     "sphere_zero": ("must be positive", [("box: [0.10, 0.10, 0.50]", "sphere: 0")]),
+    "object_too_small": ("objects[0].size: the object is 1e-09 m across", [("size: 0.15", "size: 1.0e-9")]),
     "position_huge": ("is beyond ±10000", [("position: [0.0, 0.0, 0.25]", "position: [0.0, 1.0e+30, 0.25]")]),
     "source_missing": ("file not found", [("source: bunny.obj", "source: no_such_mesh.obj")]),
     "source_name_too_long": ("File name too long", [("source: bunny.obj", "source: " + "y" * 300 + ".obj")]),
