@@ -311,9 +311,10 @@ def speed(repeat: int, world: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", default="bunny_pedestal,duck_pedestal,teddy_pedestal")
-    parser.add_argument("--set", choices=("broad", "heldout"), default=None,
-                        help="run the broad object set (benchmarks/broad_set.yaml), or the objects the stop was not "
-                        "calibrated on (heldout_set.yaml), instead of --worlds")
+    parser.add_argument("--set", default=None,
+                        help="run the broad object set (benchmarks/broad_set.yaml), the objects the stop was not "
+                        "calibrated on (heldout), or a set file of the same layout (e.g. benchmarks/field_set.yaml), "
+                        "instead of --worlds")
     parser.add_argument("--objects", default="", help="--set broad: comma list of the set's objects (default all)")
     parser.add_argument("--sensor", default="laser_striper", help="--set broad: laser_striper or depth_camera")
     parser.add_argument("--missing", default="", help="write pictures of the uncovered surface of every run "
@@ -359,7 +360,9 @@ def main(argv: list[str] | None = None) -> int:
         world_dir = Path(tempfile.mkdtemp(prefix="broad_worlds_"))
         try:
             names = [n for n in args.objects.split(",") if n]
-            set_file = HELDOUT_FILE if args.set == "heldout" else SET_FILE
+            set_file = {"broad": SET_FILE, "heldout": HELDOUT_FILE}.get(args.set) or Path(args.set)
+            if not set_file.is_file():
+                parser.error(f"--set: expected broad, heldout or a set file, got {args.set!r}")
             worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names, set_file)]
         except ValueError as error:
             parser.error(str(error))
