@@ -82,16 +82,18 @@ class VasquezEU(StrategyPlugin):
 
 
 #: the stop calibrated on the broad object set (issue 20, docs/results.md, benchmarks/calibrate_stop.py):
-#: ĉ_m 94 %, or 85 % once boundary search / hole rescan has nothing left (below that the session's
-#: fallback views go on), or ĉ_m without the support opening 99 % once a fallback view was scanned
-CALIBRATED_TERMINATION = {"coverage": 0.94, "exhausted_coverage": 0.85, "off_support_coverage": 0.99, "density": 0.2,
-                          "n_abort": 30}
+#: ĉ_m 95 %, or 90 % once boundary search / hole rescan has nothing left (below that the session's
+#: fallback views go on), or ĉ_m without the support opening 99 % once a fallback view was scanned,
+#: or ĉ_m 80 % once it grew by less than 1 point over 5 scans (the candidates add no surface)
+CALIBRATED_TERMINATION = {"coverage": 0.95, "exhausted_coverage": 0.90, "off_support_coverage": 0.99,
+                          "saturated_coverage": 0.80, "saturation_scans": 5, "saturation_delta": 0.01,
+                          "density": 0.2, "n_abort": 30}
 
 EXTRA = [
     make_strategy("ig_quality/bs_hr_calibrated",
                   "Thesis IG/Quality over BS/HR candidates with the stop calibrated on the broad object set: "
-                  "ĉ_m 94 %, or 85 % when BS/HR has no candidate left, or 99 % without the support opening after "
-                  "a fallback view (c_a at the stop >= 97 % on every object).",
+                  "ĉ_m 95 %, or 90 % when BS/HR has no candidate left, or 99 % without the support opening after "
+                  "a fallback view, or 80 % once ĉ_m stops growing (c_a at the stop >= 97 % on every object).",
                   "boundary_hole", "ig_quality", "coverage_target", {}, {"omega": -1.0}, dict(CALIBRATED_TERMINATION)),
     make_strategy("vasquez/du", "Vasquez-Gomez deterministic utility (pos reg sur dist) over random views.",
                   "random", "area_factor", "unknown_below", {"count": 40}),

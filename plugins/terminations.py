@@ -33,7 +33,10 @@ class CoverageTarget(Termination):
     that bias is the opening where the object stands on its support, which no sensor sees: with
     ``off_support_coverage`` > 0 it also stops when ĉ_m without that opening reaches the target
     once a fallback view (chosen over all directions) has been scanned; the fallback view is what
-    finds a cavity that the fan areas of its small openings do not count.
+    finds a cavity that the fan areas of its small openings do not count. With
+    ``saturated_coverage`` < 1 it also stops at that ĉ_m once ĉ_m has stopped growing: shapes whose
+    many small holes no view closes (parts of several bodies, thin bars) keep boundary or hole
+    candidates that add no surface, and would otherwise scan on to n_abort.
     """
 
     name = "coverage_target"
@@ -51,6 +54,11 @@ class CoverageTarget(Termination):
               low=0.0, high=1.0),
         Param("off_support_coverage", float, 0.0, "", "also stop at this ĉ_m without the opening where the object "
               "stands on its support, once a fallback view has been scanned; 0 = never", low=0.0, high=1.0),
+        Param("saturated_coverage", float, 1.0, "", "also stop at this ĉ_m once it grew by less than "
+              "saturation_delta over the last saturation_scans scans (the candidates add no surface); 1 = never",
+              low=0.0, high=1.0),
+        Param("saturation_scans", int, 3, "", "scans over which ĉ_m must grow", low=1),
+        Param("saturation_delta", float, 0.01, "", "growth of ĉ_m below which it has saturated", low=0.0),
     )
 
     def reset(self) -> None:
@@ -78,10 +86,18 @@ class CoverageTarget(Termination):
             reason = (f"ĉ_m without the support opening = {off:.3f} >= {self.off_support_coverage} after "
                       f"{ctx.fallback_scans} fallback scan(s), d̄_m = {d:.3f} >= {self.density}")
             return Decision(STOP, reason, SUCCESS, min(off - self.off_support_coverage, d - self.density))
+        history = ctx.coverage_history
+        window = self.saturation_scans
+        if self.saturated_coverage < 1.0 and len(history) > window and reaches(c, self.saturated_coverage) \
+                and reaches(d, self.density):
+            gain = c - float(history[-1 - window])
+            if not reaches(gain, self.saturation_delta):
+                reason = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage} grew by {gain:.4f} < {self.saturation_delta} "
+                          f"over {window} scans, d̄_m = {d:.3f} >= {self.density}")
+                return Decision(STOP, reason, SUCCESS, min(self.saturation_delta - gain, c - self.saturated_coverage))
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET,
                             margin)
-        history = ctx.coverage_history
         stalled = len(history) >= 2 and history[-1] - history[-2] < self.switch_delta
         if self.switch_delta > 0 and not self.switched and stalled:
             self.switched = True

@@ -62,14 +62,20 @@ def test_terminations(registry) -> None:  # noqa: ANN001
     ctx.exhausted = True  # the strategy's generator had nothing; a fallback's candidates fill the stack
     assert none_left.decide(ctx).stop
     ctx.exhausted = False
-    # the calibrated stop: ĉ_m 94 %, or 85 % when boundary search / hole rescan has nothing left, or
-    # 99 % without the support opening once a fallback view was scanned
+    # the calibrated stop: ĉ_m 95 %, or 90 % when boundary search / hole rescan has nothing left, or
+    # 99 % without the support opening once a fallback view was scanned, or 80 % once ĉ_m grew by
+    # less than 1 point over 5 scans
     calibrated = registry.create("strategy", "ig_quality/bs_hr_calibrated").strategy.build(registry)[2]
     for history, exhausted, off_support, fallback_scans, stop in [
-            ([0.8, 0.86], False, 0.95, 0, False), ([0.8, 0.86], True, 0.95, 0, True),
-            ([0.8, 0.84], True, 0.95, 0, False), ([0.9, 0.941], False, 0.95, 0, True),
+            ([0.8, 0.91], False, 0.95, 0, False), ([0.8, 0.91], True, 0.95, 0, True),
+            ([0.8, 0.89], True, 0.95, 0, False), ([0.9, 0.941], False, 0.95, 0, False),
+            ([0.9, 0.951], False, 0.95, 0, True),
             ([0.6, 0.6], True, 0.995, 0, False), ([0.6, 0.6], True, 0.995, 1, True),
-            ([0.6, 0.6], True, 0.985, 2, False)]:
+            ([0.6, 0.6], True, 0.985, 2, False),
+            ([0.5, 0.8, 0.803, 0.805, 0.806, 0.807, 0.808], False, 0.9, 0, True),  # saturated at 80 %
+            ([0.5, 0.79, 0.79, 0.79, 0.79, 0.79, 0.79], False, 0.9, 0, False),  # saturated below 80 %
+            ([0.5, 0.8, 0.803, 0.805, 0.806, 0.807, 0.812], False, 0.9, 0, False),  # still growing 1 point
+            ([0.8, 0.8, 0.8, 0.8, 0.8], False, 0.9, 0, False)]:  # fewer than 5 scans to compare
         ctx = ctx_with(history)
         ctx.exhausted, ctx.off_support_history, ctx.fallback_scans = exhausted, [off_support], fallback_scans
         decision = calibrated.decide(ctx)
