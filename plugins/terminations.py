@@ -90,7 +90,7 @@ class CoverageTarget(Termination):
         window = self.saturation_scans
         if self.saturated_coverage < 1.0 and len(history) > window and reaches(c, self.saturated_coverage) \
                 and reaches(d, self.density):
-            gain = c - float(history[-1 - window])
+            gain = float(history[-1]) - float(history[-1 - window])
             if not reaches(gain, self.saturation_delta):
                 reason = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage} grew by {gain:.4f} < {self.saturation_delta} "
                           f"over {window} scans, d̄_m = {d:.3f} >= {self.density}")
