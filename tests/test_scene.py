@@ -189,9 +189,11 @@ def test_an_object_split_off_a_known_one_stays_apart_and_its_model_leaves_the_kn
         pose = np.asarray(db.location(rows["box"]["model"])["pose"])
     vertices = mesh.vertices @ pose[:3, :3].T + pose[:3, 3]
     with Simulation(world, registry) as sim:
-        near = {b.name: np.linalg.norm(RayCaster([b.mesh]).closest(vertices)[0] - vertices, axis=1) < 0.003
-                for b in sim.objects()}
-    assert near["box"].mean() > 0.9 and near["duck"].sum() == 0, {k: int(v.sum()) for k, v in near.items()}
+        distance = {b.name: np.linalg.norm(RayCaster([b.mesh]).closest(vertices)[0] - vertices, axis=1)
+                    for b in sim.objects()}
+    # the box's model lies on the box within the Kinect profile's noise (a few mm at 1 m), none of it on the duck
+    shares = {name: float((d < 0.005).mean()) for name, d in distance.items()}
+    assert shares["box"] > 0.9 and (distance["duck"] < 0.003).sum() == 0, shares
 
 
 @pytest.mark.parametrize("views", [0, 2])
@@ -611,9 +613,10 @@ def test_scene_trees_run_with_an_arm_and_a_mobile_base(registry, tmp_path, tree,
         known = [o for o in known if o["result"] == "recognised" or o["name"] != "duck"]
     for row in known:
         assert row["result"] == "recognised", row
-        if "map_error_mm" in row:
-            assert row["map_error_mm"] < 5.0 and row["map_error_deg"] < 2.0, row
-            assert row["pose_error_mm"] < 5.0 + 2.0 * metrics["pose_graph"]["corrected_mm"], row
+        if "map_error_mm" in row:  # the views that recognised it are off each other by the relative error
+            graph = metrics["pose_graph"]
+            assert row["map_error_mm"] < 5.0 + graph["relative_corrected_mm"] and row["map_error_deg"] < 2.0, row
+            assert row["pose_error_mm"] < 5.0 + 2.0 * graph["corrected_mm"], row
         else:
             assert row["pose_error_mm"] < 5.0 and row["pose_error_deg"] < 2.0, row
     with ObjectDatabase.open(db, readonly=True) as opened:
