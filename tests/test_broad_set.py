@@ -50,6 +50,16 @@ def test_the_held_out_objects_are_not_in_the_set_and_every_world_loads(tmp_path:
         load_world_spec(path)
 
 
+def test_the_field_objects_are_in_neither_set_and_every_world_loads(tmp_path: Path) -> None:
+    field_file = HELDOUT_FILE.with_name("field_set.yaml")
+    field = broad_objects(field_file)
+    assert len(field) >= 15
+    chosen_on = {e["source"] for e in broad_objects()} | {e["source"] for e in broad_objects(HELDOUT_FILE)}
+    assert not {e["source"] for e in field} & chosen_on
+    for path in write_worlds(tmp_path, set_file=field_file):
+        load_world_spec(path)
+
+
 @pytest.mark.parametrize("name", ["mug", "torus", "jenga"])
 def test_an_object_has_its_size_and_stands_on_the_pedestal(open_world, tmp_path: Path, name: str) -> None:  # noqa: ANN001
     [path] = write_worlds(tmp_path, names=[name])

@@ -91,6 +91,22 @@ def test_terminations(registry) -> None:  # noqa: ANN001
     assert not stag.decide(ctx_with([0.2, 0.5, 0.8, 0.85, 0.9])).stop
 
 
+def test_the_saturation_clause_is_replayed_as_the_termination_decides(registry) -> None:  # noqa: ANN001
+    """benchmarks/calibrate_stop.py replays the saturation clause at the scan the plugin stops at."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from calibrate_stop import stop_index
+
+    curve = [0.4, 0.6, 0.75, 0.80, 0.805, 0.806, 0.807, 0.808, 0.809, 0.81, 0.82]
+    run = {"coverage_estimate": curve, "coverage_off_support": curve, "density": [0.5] * len(curve),
+           "sources": ["initial"] + ["boundary"] * (len(curve) - 1)}
+    replayed = stop_index(run, (0.95, 0.9, 0.99), 0.2, "fallback_", (0.8, 5, 0.01))
+    termination = registry.create("termination", "coverage_target", {
+        "coverage": 0.95, "exhausted_coverage": 0.9, "off_support_coverage": 0.99, "saturated_coverage": 0.8,
+        "saturation_scans": 5, "saturation_delta": 0.01})
+    decided = next(i for i in range(len(curve)) if termination.decide(ctx_with(curve[: i + 1])).stop)
+    assert replayed == decided == 8  # ĉ_m 0.809 grew by 0.009 since 0.80 five scans before
+
+
 def test_candidate_stack_drops_stale_and_repeated() -> None:
     stack = CandidateStack(max_age=3)
     a = Candidate(np.eye(4), "boundary", created=0)
