@@ -11,6 +11,13 @@ from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Param, reaches
 from explore.nbv import CONTINUE, STOP, SWITCH, Decision, PlanningContext
 
 
+def window_ends(history: list[float], window: int) -> tuple[float, float] | None:
+    """(the value ``window`` scans ago, the latest value) of a per-scan history; None while it is shorter."""
+    if len(history) <= window:
+        return None
+    return float(history[-1 - window]), float(history[-1])
+
+
 class MaxScans(Termination):
     """Stop after a number of scans."""
 
@@ -87,14 +94,12 @@ class CoverageTarget(Termination):
                       f"{ctx.fallback_scans} fallback scan(s), d̄_m = {d:.3f} >= {self.density}")
             return Decision(STOP, reason, SUCCESS, min(off - self.off_support_coverage, d - self.density))
         history = ctx.coverage_history
-        window = self.saturation_scans
-        if self.saturated_coverage < 1.0 and len(history) > window and reaches(c, self.saturated_coverage) \
-                and reaches(d, self.density):
-            gain = float(history[-1]) - float(history[-1 - window])
-            if not reaches(gain, self.saturation_delta):
-                reason = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage} grew by {gain:.4f} < {self.saturation_delta} "
-                          f"over {window} scans, d̄_m = {d:.3f} >= {self.density}")
-                return Decision(STOP, reason, SUCCESS, min(self.saturation_delta - gain, c - self.saturated_coverage))
+        ends = window_ends(history, self.saturation_scans)
+        if self.saturated_coverage < 1.0 and ends is not None and reaches(c, self.saturated_coverage) \
+                and reaches(d, self.density) and not reaches(gain := ends[1] - ends[0], self.saturation_delta):
+            reason = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage} grew by {gain:.4f} < {self.saturation_delta} "
+                      f"over {self.saturation_scans} scans, d̄_m = {d:.3f} >= {self.density}")
+            return Decision(STOP, reason, SUCCESS, min(self.saturation_delta - gain, c - self.saturated_coverage))
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET,
                             margin)
@@ -155,9 +160,10 @@ class Stagnation(Termination):
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached", BUDGET)
         history = ctx.coverage_history if self.measure == "coverage" else ctx.unknown_history
-        if ctx.iteration < self.min_scans or len(history) <= self.window:
+        ends = window_ends(history, self.window)
+        if ctx.iteration < self.min_scans or ends is None:
             return Decision(CONTINUE, "")
-        old, new = float(history[-1 - self.window]), float(history[-1])
+        old, new = ends
         change = abs(new - old) / max(abs(old), 1e-9) if self.measure == "unknown" else abs(new - old)
         if not reaches(change, self.delta):
             return Decision(STOP, f"{self.measure} changed by {change:.4f} < {self.delta} over {self.window} scans",
