@@ -20,6 +20,7 @@ import yaml
 SET_FILE = Path(__file__).with_name("broad_set.yaml")
 #: objects the calibration of the stop never saw (the broad set is what it was chosen on)
 HELDOUT_FILE = Path(__file__).with_name("heldout_set.yaml")
+FIELD_FILE = Path(__file__).with_name("field_set.yaml")  # objects neither stop rule was chosen on
 PEDESTAL_TOP = 0.50
 SENSORS = {
     "laser_striper": {"plugin": "laser_striper"},

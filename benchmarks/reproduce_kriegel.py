@@ -313,8 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worlds", default="bunny_pedestal,duck_pedestal,teddy_pedestal")
     parser.add_argument("--set", default=None,
                         help="run the broad object set (benchmarks/broad_set.yaml), the objects the stop was not "
-                        "calibrated on (heldout), or a set file of the same layout (e.g. benchmarks/field_set.yaml), "
-                        "instead of --worlds")
+                        "calibrated on (heldout), the objects neither was chosen on (field), or a set file of that "
+                        "layout, instead of --worlds")
     parser.add_argument("--objects", default="", help="--set broad: comma list of the set's objects (default all)")
     parser.add_argument("--sensor", default="laser_striper", help="--set broad: laser_striper or depth_camera")
     parser.add_argument("--missing", default="", help="write pictures of the uncovered surface of every run "
@@ -355,14 +355,14 @@ def main(argv: list[str] | None = None) -> int:
     registry = Registry.load()
     worlds = [w for w in args.worlds.split(",") if w]
     if args.set:
-        from broad_worlds import HELDOUT_FILE, SET_FILE, write_worlds
+        from broad_worlds import FIELD_FILE, HELDOUT_FILE, SET_FILE, write_worlds
 
         world_dir = Path(tempfile.mkdtemp(prefix="broad_worlds_"))
         try:
             names = [n for n in args.objects.split(",") if n]
-            set_file = {"broad": SET_FILE, "heldout": HELDOUT_FILE}.get(args.set) or Path(args.set)
+            set_file = {"broad": SET_FILE, "heldout": HELDOUT_FILE, "field": FIELD_FILE}.get(args.set) or Path(args.set)
             if not set_file.is_file():
-                parser.error(f"--set: expected broad, heldout or a set file, got {args.set!r}")
+                parser.error(f"--set: expected broad, heldout, field or a set file, got {args.set!r}")
             worlds = [str(p) for p in write_worlds(world_dir, args.sensor, names, set_file)]
         except ValueError as error:
             parser.error(str(error))

@@ -13,6 +13,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 from broad_worlds import (  # noqa: E402
+    FIELD_FILE,
     HELDOUT_FILE,
     PEDESTAL_TOP,
     broad_objects,
@@ -51,12 +52,11 @@ def test_the_held_out_objects_are_not_in_the_set_and_every_world_loads(tmp_path:
 
 
 def test_the_field_objects_are_in_neither_set_and_every_world_loads(tmp_path: Path) -> None:
-    field_file = HELDOUT_FILE.with_name("field_set.yaml")
-    field = broad_objects(field_file)
+    field = broad_objects(FIELD_FILE)
     assert len(field) >= 15
     chosen_on = {e["source"] for e in broad_objects()} | {e["source"] for e in broad_objects(HELDOUT_FILE)}
     assert not {e["source"] for e in field} & chosen_on
-    for path in write_worlds(tmp_path, set_file=field_file):
+    for path in write_worlds(tmp_path, set_file=FIELD_FILE):
         load_world_spec(path)
 
 
