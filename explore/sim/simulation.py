@@ -278,11 +278,15 @@ class Simulation:
         for index, body in enumerate(b for b in self.bodies if b.is_object):
             lo, hi = body.mesh.bounds
             if np.any(lo < self.spec.region_min - tol) or np.any(hi > self.spec.region_max + tol):
+                spec = self.spec.objects[index]
+                oversized = np.max(hi - lo) > 10.0 * np.max(self.spec.region_max - self.spec.region_min)
+                hint = ("; is its mesh in millimetres? give the object a size (its largest extent in m)"
+                        if oversized and spec.size is None and np.allclose(spec.scale, 1.0) else "")
                 raise BadInput(
                     str(self.spec.path),
                     f"objects[{index}] ({body.name})",
                     f"extends outside the region: object box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}, "
-                    f"region {self.spec.region_min.tolist()}..{self.spec.region_max.tolist()}",
+                    f"region {self.spec.region_min.tolist()}..{self.spec.region_max.tolist()}{hint}",
                 )
 
     def _check_overlaps(self) -> None:

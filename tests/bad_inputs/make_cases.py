@@ -76,6 +76,7 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "source_urdf_garbage": ("pybullet cannot load it", [("source: bunny.obj", "source: ../meshes/garbage.urdf")]),
     "source_urdf_no_visual": ("no visual geometry", [("source: bunny.obj", "source: ../meshes/no_visual.urdf")]),
     "source_is_folder": ("file not found", [("source: bunny.obj", "source: ../meshes")]),
+    "source_in_millimetres": ("is its mesh in millimetres?", [("source: bunny.obj", "source: ../meshes/box_mm.obj"), ("    size: 0.15\n", "")]),
     "scale_negative": ("must be positive", [("size: 0.15", "scale: -1")]),
     "scale_and_size": ("either size or scale", [("size: 0.15", "size: 0.15\n    scale: 2")]),
     "scale_list_short": ("expected a list of 3 numbers", [("size: 0.15", "scale: [1, 2]")]),
@@ -218,6 +219,9 @@ def write_cases() -> None:
     (meshes / "garbage.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n")
     (meshes / "garbage.stl").write_bytes(b"solid x\nfacet normal 0 0\nendsolid\n")
     (meshes / "garbage.urdf").write_text("<robot name='x'><link name='a'><visual>")
+    corners = [(x, y, z) for x in (0, 80) for y in (0, 60) for z in (0, 40)]  # a box in millimetres
+    faces = [(1, 2, 4), (1, 4, 3), (5, 7, 8), (5, 8, 6), (1, 5, 6), (1, 6, 2), (3, 4, 8), (3, 8, 7), (1, 3, 7), (1, 7, 5), (2, 6, 8), (2, 8, 4)]
+    (meshes / "box_mm.obj").write_text("".join(f"v {x} {y} {z}\n" for x, y, z in corners) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
     (meshes / "no_visual.urdf").write_text("<robot name='x'><link name='a'/></robot>\n")
     write_results()
     write_databases()
