@@ -93,7 +93,7 @@ def register(app: typer.Typer) -> None:
         loaded = TriMesh(loaded.vertices * scale, loaded.triangles)
         lo, hi = loaded.bounds
         extent = float(np.max(hi - lo))
-        if not 1e-3 <= extent <= 100.0:
+        if not 1e-3 <= extent <= 10.0:
             raise BadInput(str(mesh), "--scale", f"the mesh is {extent:.3g} m across with --scale {scale:g}: "
                                                  "no object a robot models (0.001 turns millimetres into metres)")
         stored = {}
