@@ -84,6 +84,10 @@ def build_grid(
     _check_plugins(registry, "strategy", strategy_names, "--strategies")
     _check_plugins(registry, "motion_planner", planner_names, "--planners")
     _check_plugins(registry, "robot", robot_names, "--robots")
+    runs = len(world_names) * len(strategy_names) * len(planner_names) * len(robot_names) * len(seed_list)
+    if runs > Grid.MAX_RUNS:
+        raise BadInput("explore compare", None, f"the grid has {runs} runs, more than {Grid.MAX_RUNS}; "
+                                                "split it into several comparisons")
     parsed_settings = RunConfig.parse_settings(settings)
     for world in resolved_worlds:  # every --set key and value, as each run will check them
         for strategy, planner, robot in itertools.product(strategy_names, planner_names, robot_names):
@@ -99,6 +103,8 @@ def build_grid(
 
 def parse_seeds(text: str) -> list[int]:
     """``N`` (seeds 0..N-1), ``A-B`` (A to B inclusive) or ``a,b,c``: the seeds of a grid."""
+    from explore.runtime import Grid
+
     value = text.strip()
     try:
         if "," in value:
@@ -107,11 +113,15 @@ def parse_seeds(text: str) -> list[int]:
             first, last = (int(part) for part in value.split("-", 1))
             if last < first:
                 raise BadInput("--seeds", text, f"the range ends before it starts ({last} < {first})")
+            if last - first + 1 > Grid.MAX_RUNS:
+                raise BadInput("--seeds", text, f"more seeds than a grid may have runs ({Grid.MAX_RUNS})")
             seeds = list(range(first, last + 1))
         else:
             count = int(value)
             if count < 1:
                 raise BadInput("--seeds", text, "needs at least 1 seed")
+            if count > Grid.MAX_RUNS:
+                raise BadInput("--seeds", text, f"more seeds than a grid may have runs ({Grid.MAX_RUNS})")
             seeds = list(range(count))
     except ValueError:
         raise BadInput("--seeds", text, "expected N, a range A-B or a list a,b,c of whole numbers") from None

@@ -134,6 +134,7 @@ class Grid:
     threads: int = 1
     videos: bool = False  # one video per method: its first seed's run.mp4 (changes no result)
 
+    MAX_RUNS = 100_000  # ~35 days of 30 s runs on 2 cores: a larger grid is a typo, not a plan
     # fields that change what a run computes: a results folder holds one value of each
     DEFINING = ("tree", "max_scans", "settings", "plugins", "threads")
 
