@@ -97,3 +97,23 @@ def test_a_sensor_parameter_of_the_benchmark_reaches_the_sensor_and_a_bad_one_is
     unshadowed = run_one(job[:7] + ({"profile": "triangulation", "camera_shadow": "false"}, ""))["coverage"]
     assert len(shadowed) == len(unshadowed) == 2
     assert unshadowed[0] > shadowed[0]  # the camera's shadow costs returns in the same first scan
+
+
+def test_the_table_counts_scans_to_97_percent_and_compares_with_the_best_sphere_variant() -> None:
+    """benchmarks/broad_table.py: n_97 is the first scan at c_a >= 97 % (budget + 1 if never), the
+    best sphere variant is chosen per object, and the counts say which targets hold."""
+    from broad_table import markdown, scans_to, table
+
+    assert scans_to([0.5, 0.96, 0.97, 0.99]) == 3 and scans_to([0.5, 0.9]) == 3
+
+    def run(strategy: str, curve: list[float], n_s: int, path: float) -> dict:
+        return {"world": "broad_cup", "strategy": strategy, "seed": 0, "n_s": n_s, "coverage": curve,
+                "coverage_estimate": [c - 0.1 for c in curve], "scan_path_m": path, "fallback_scans": 0}
+
+    runs = [run("ig_quality/bs_hr", [0.6, 0.9, 0.98, 0.99], 3, 1.0),
+            run("ig/sphere", [0.7, 0.97, 0.99, 0.99], 4, 2.0),
+            run("random/sphere", [0.5, 0.8, 0.9, 0.95], 2, 3.0)]
+    (row,) = table(runs, "ig_quality/bs_hr")
+    assert row["main"]["n_97"] == 3 and row["sphere_97"] == "ig/sphere" and not row["n97_ok"]
+    assert row["sphere"] == "random/sphere" and not row["ns_ok"] and row["shortest"]
+    assert "n_97 <= best sphere: 0 of 1; shortest l_s: 1 of 1" in markdown([row])
