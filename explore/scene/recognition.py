@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from explore.core import Pose, pose_error, reaches
 from explore.perception import (
@@ -29,6 +30,7 @@ from explore.perception import (
 )
 from explore.scene.scene_objects import (
     AMBIGUOUS,
+    MODELLING,
     RECOGNISED,
     UNEXPLAINED,
     UNKNOWN,
@@ -38,11 +40,25 @@ from explore.scene.scene_objects import (
 if TYPE_CHECKING:
     from explore.scene.session import SceneSession
 
+EXPLAINED_FLOOR = 0.005  # m: never closer than this to the model (a noisy view's own spread)
+
 
 def _agree(pose: Pose, other: Pose) -> bool:
     """Two poses of one model agree within the fusion radius of :func:`fuse_poses` (1 cm, 5°)."""
     t_err, r_err = pose_error(pose, other)
     return t_err <= 0.01 and math.degrees(r_err) <= 5.0
+
+
+def explained_distance(distance: np.ndarray, limit: float, floor: float = EXPLAINED_FLOOR) -> float:
+    """How far from the model surface a point may lie and still be the model's: four standard
+    deviations of the residuals within ``limit`` (their median / 0.6745, the spread of a half-normal
+    distance), kept between ``floor`` and ``limit``. The points a model explains lie within the
+    sensor's noise of it (a duck's within 4 mm at its fitted pose); a fixed 15 mm would also hand it
+    the top of the box it stands on, 4-15 mm below its base, which then lowers its q_h below 0.5."""
+    near = distance[distance <= limit]
+    if len(near) == 0:
+        return float(limit)
+    return float(np.clip(4.0 * np.median(near) / 0.6745, floor, limit))
 
 
 class Recognition:
@@ -197,13 +213,21 @@ class Recognition:
         """Points the recognised model does not explain (an object touching it) become a new object.
 
         A share of at least ``split_share`` of the cluster (and ``min_points`` points) farther
-        than ``split_distance`` from the model surface at the pose is split off.
+        than :func:`explained_distance` from the model surface at the pose is split off; to the
+        object split off before if they touch it and it is still open (later views of the same block).
         """
         scene = self.scene
         mesh = next(m.mesh for m in scene.models if m.name == obj.model)
-        far = distance_to_model(mesh, obj.pose, obj.cluster.points) > scene.settings.split_distance
+        distance = distance_to_model(mesh, obj.pose, obj.cluster.points)
+        far = distance > explained_distance(distance, scene.settings.split_distance)
         if far.sum() < scene.settings.min_points or far.mean() < scene.settings.split_share:
             return None
+        if (earlier := self._touching_split(obj, obj.cluster.subset(far))) is not None:
+            earlier.extend(obj.cluster.subset(far))
+            obj.cluster = obj.cluster.subset(~far)
+            obj._sample = None
+            obj.note(f"{int(far.sum())} points not explained by {obj.model}: given to object {earlier.id}")
+            return earlier
         new_id = max(o.id for o in scene.objects) + 1
         rest = SceneObject(new_id, dataclasses.replace(obj.cluster.subset(far), id=new_id))
         obj.cluster = obj.cluster.subset(~far)
@@ -215,6 +239,16 @@ class Recognition:
         rest.apart.add(obj.id)
         scene.objects.append(rest)
         return rest
+
+    def _touching_split(self, obj: SceneObject, points: Cluster) -> SceneObject | None:
+        """An open object split off ``obj`` before that ``points`` touch (within the segmenter's tolerance)."""
+        tolerance = float(getattr(self.scene.segmenter, "cluster_tolerance", 0.02))
+        for other in self.scene.objects:
+            if other.id in obj.apart and not other.explained and other.status != MODELLING:
+                dist, _ = cKDTree(other.sample()).query(points.points, distance_upper_bound=tolerance)
+                if np.isfinite(dist).any():
+                    return other
+        return None
 
     def recognise_all(self) -> dict[int, str]:
         """Recognise and validate every object that is not explained or being modelled."""
