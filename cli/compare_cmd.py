@@ -113,18 +113,17 @@ def parse_seeds(text: str) -> list[int]:
             first, last = (int(part) for part in value.split("-", 1))
             if last < first:
                 raise BadInput("--seeds", text, f"the range ends before it starts ({last} < {first})")
-            if last - first + 1 > Grid.MAX_RUNS:
-                raise BadInput("--seeds", text, f"more seeds than a grid may have runs ({Grid.MAX_RUNS})")
-            seeds = list(range(first, last + 1))
+            seeds = range(first, last + 1)
         else:
             count = int(value)
             if count < 1:
                 raise BadInput("--seeds", text, "needs at least 1 seed")
-            if count > Grid.MAX_RUNS:
-                raise BadInput("--seeds", text, f"more seeds than a grid may have runs ({Grid.MAX_RUNS})")
-            seeds = list(range(count))
+            seeds = range(count)
     except ValueError:
         raise BadInput("--seeds", text, "expected N, a range A-B or a list a,b,c of whole numbers") from None
+    if len(seeds) > Grid.MAX_RUNS:  # before a list of them is built
+        raise BadInput("--seeds", text, f"more seeds than a grid may have runs ({Grid.MAX_RUNS})")
+    seeds = list(seeds)
     if any(seed < 0 for seed in seeds):
         raise BadInput("--seeds", text, "seeds are whole numbers from 0")
     if len(set(seeds)) != len(seeds):

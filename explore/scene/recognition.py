@@ -222,17 +222,16 @@ class Recognition:
         far = distance > explained_distance(distance, scene.settings.split_distance)
         if far.sum() < scene.settings.min_points or far.mean() < scene.settings.split_share:
             return None
-        if (earlier := self._touching_split(obj, obj.cluster.subset(far))) is not None:
-            earlier.extend(obj.cluster.subset(far))
-            obj.cluster = obj.cluster.subset(~far)
-            obj._sample = None
-            obj.note(f"{int(far.sum())} points not explained by {obj.model}: given to object {earlier.id}")
-            return earlier
-        new_id = max(o.id for o in scene.objects) + 1
-        rest = SceneObject(new_id, dataclasses.replace(obj.cluster.subset(far), id=new_id))
+        points = obj.cluster.subset(far)
         obj.cluster = obj.cluster.subset(~far)
         obj._sample = None
         obj.view_hypotheses, obj.checked_views, obj.view_checks = [], set(), {}
+        if (earlier := self._touching_split(obj, points)) is not None:
+            earlier.extend(points)
+            obj.note(f"{int(far.sum())} points not explained by {obj.model}: given to object {earlier.id}")
+            return earlier
+        new_id = max(o.id for o in scene.objects) + 1
+        rest = SceneObject(new_id, dataclasses.replace(points, id=new_id))
         obj.note(f"{int(far.sum())} points not explained by {obj.model}: split off as object {new_id}")
         rest.note(f"split off object {obj.id}")
         obj.apart.add(new_id)
