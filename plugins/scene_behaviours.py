@@ -257,7 +257,7 @@ class SegmentScene(ExploreBehaviour):
         objects = scene.segment()
         self.context.status_line = _status(self)
         if scene.table is None:
-            return failure("no support plane found")
+            return failure("no support plane found (the views show no table top or floor for the objects to stand on)")
         return success(f"{len(objects)} objects")
 
 
