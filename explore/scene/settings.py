@@ -41,8 +41,10 @@ class SceneSettings:
     min_points : clusters with fewer points (over all views) are noise, not objects
     reach_tries : NBS candidates tried for reachability (IK) per modelling step before the most
         novel reachable view of the object is taken instead
-    split_distance, split_share : points of a recognised object farther than ``split_distance``
-        from the model, if at least ``split_share`` of them, are another object touching it
+    split_distance, split_share : points of a recognised object farther from the model than four
+        spreads of its residuals (at most ``split_distance``, at least 5 mm:
+        :func:`explore.scene.recognition.explained_distance`), if at least ``split_share`` of them,
+        are another object touching it
     register : grow a pose graph with every view when the robot has a noisy base that cannot
         localise itself (and correct the views, the clusters and the PVS with it); a base with a
         planar laser localises every view in the known room as it drives (``Mover.localise``)
