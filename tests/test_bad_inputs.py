@@ -169,8 +169,8 @@ def test_a_signal_ends_with_the_results_so_far(command, sig, code, tmp_path) -> 
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and process.poll() is None:
-        if ready.exists() and (command == "compare" or len(ready.read_text().splitlines()) > 20):
-            break
+        if ready.exists() and (command == "compare" or '"event": "integrated"' in ready.read_text()):
+            break  # a run: once its first scan is in the model (its 21 first trace lines come before any scan)
         time.sleep(0.2)
     time.sleep(2.0)
     process.send_signal(sig)
