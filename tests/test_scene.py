@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -127,16 +128,24 @@ def test_second_run_recognises_the_modelled_object(open_world, registry, small_r
     assert metrics["wrong_matches"]["accepted"] == 0 and not metrics["added_to_database"]
 
 
-def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_path):
-    """Bad input: a block touching the duck forms one cluster; the duck is recognised and the points it
-    does not explain become a second object (to be modelled)."""
-
-    with open_world(_world(tmp_path, TOUCHING)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+@contextmanager
+def _first_round(open_world, registry, tmp_path, text: str):
+    """A scene's first round on a world whose objects touch: overview, one cluster, recognition
+    (the known objects seeded into a fresh database); yields (sim, db, scene)."""
+    with open_world(_world(tmp_path, text)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         db.seed_from_world(sim)
         scene = SceneSession(sim, registry, db)
         scene.viewing.overview()
         assert len(scene.segment()) == 1
         scene.recognition.recognise_all()
+        yield sim, db, scene
+
+
+def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_path):
+    """Bad input: a block touching the duck forms one cluster; the duck is recognised and the points it
+    does not explain become a second object (to be modelled)."""
+
+    with _first_round(open_world, registry, tmp_path, TOUCHING) as (sim, db, scene):
         objects = scene.candidates()
         assert len(objects) == 2
         duck = next(o for o in objects if o.model == "duck")
@@ -220,12 +229,7 @@ def test_a_known_object_standing_on_an_unknown_one_keeps_only_its_own_points(ope
     from explore.perception import distance_to_model
     from explore.scene.recognition import explained_distance
 
-    with open_world(_world(tmp_path, DUCK_ON_CRATE)) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
-        db.seed_from_world(sim)
-        scene = SceneSession(sim, registry, db)
-        scene.viewing.overview()
-        assert len(scene.segment()) == 1
-        scene.recognition.recognise_all()
+    with _first_round(open_world, registry, tmp_path, DUCK_ON_CRATE) as (sim, db, scene):
         truth = {b.name: b.mesh for b in sim.objects()}
         duck = next(o for o in scene.candidates() if o.model == "duck")
         crate = next(o for o in scene.candidates() if o is not duck)

@@ -11,7 +11,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from explore.core import Pose, pose_error, reaches
 from explore.perception import (
@@ -241,12 +240,10 @@ class Recognition:
 
     def _touching_split(self, obj: SceneObject, points: Cluster) -> SceneObject | None:
         """An open object split off ``obj`` before that ``points`` touch (within the segmenter's tolerance)."""
-        tolerance = float(getattr(self.scene.segmenter, "cluster_tolerance", 0.02))
         for other in self.scene.objects:
-            if other.id in obj.apart and not other.explained and other.status != MODELLING:
-                dist, _ = cKDTree(other.sample()).query(points.points, distance_upper_bound=tolerance)
-                if np.isfinite(dist).any():
-                    return other
+            if (other.id in obj.apart and not other.explained and other.status != MODELLING
+                    and other.touches(points.points, self.scene.touch_tolerance)):
+                return other
         return None
 
     def recognise_all(self) -> dict[int, str]:

@@ -106,6 +106,13 @@ class SceneObject:
             self._sample = self.cluster.points[np.sort(first)]
         return self._sample
 
+    def touches(self, points: Points3, tolerance: float) -> bool:
+        """Whether any of ``points`` lies within ``tolerance`` of this object's (thinned) points."""
+        from scipy.spatial import cKDTree
+
+        dist, _ = cKDTree(self.sample()).query(points, distance_upper_bound=tolerance)
+        return bool(np.isfinite(dist).any())
+
     def extend(self, part: Cluster) -> None:
         c = self.cluster
         self.cluster = Cluster(c.id, np.vstack([c.points, part.points]), np.vstack([c.normals, part.normals]),

@@ -263,12 +263,14 @@ class SceneSession:
             if mask.any():
                 obj.extend(cluster.subset(mask))
 
+    @property
+    def touch_tolerance(self) -> float:
+        """How near two objects' points must come for them to touch: the segmenter's cluster tolerance."""
+        return float(getattr(self.segmenter, "cluster_tolerance", 0.02))
+
     def _merge_fragments(self) -> None:
         """Merge objects not yet explained whose points touch (one object seen in pieces), unless a
         recognised model split one off the other (an object touching a known one)."""
-        from scipy.spatial import cKDTree
-
-        tolerance = float(getattr(self.segmenter, "cluster_tolerance", 0.02))
         merged = True
         while merged:
             merged = False
@@ -277,8 +279,7 @@ class SceneSession:
                 for b in open_objects[i + 1 :]:
                     if b.id in a.apart or a.id in b.apart:
                         continue
-                    dist, _ = cKDTree(a.sample()).query(b.sample(), distance_upper_bound=tolerance)
-                    if np.any(np.isfinite(dist)):
+                    if a.touches(b.sample(), self.touch_tolerance):
                         a.extend(b.cluster)
                         a.apart |= b.apart
                         a.status = UNEXPLAINED
