@@ -106,7 +106,7 @@ def save_scene_png(session: Any, path: Path) -> None:
     if session.table is not None:
         hull = session.table.hull @ session.table.world_T_table[:3, :2].T + session.table.world_T_table[:3, 3]
         ring = np.vstack([hull, hull[:1]])
-        ax.plot(ring[:, 0], ring[:, 1], color="0.6", lw=1, label="table hull")
+        ax.plot(ring[:, 0], ring[:, 1], color="0.6", lw=1, label="support hull")
     names = []
     for obj in session.candidates():
         pts = obj.cluster.points[:: max(1, len(obj.cluster.points) // 3000)]

@@ -112,6 +112,40 @@ def test_table_without_objects(segmenter):
     assert result.clusters == []
 
 
+def _cloud(*parts: np.ndarray) -> Cloud:
+    points = np.vstack(parts)
+    n = len(points)
+    return Cloud(points, np.tile([0.0, -1.0, 1.5], (n, 1)), np.zeros(n, np.int64), np.arange(n))
+
+
+def _slab(rng, lo, hi, n: int) -> np.ndarray:
+    return rng.uniform(lo, hi, size=(n, 3))
+
+
+def test_objects_on_the_floor_stand_on_it_only_when_no_table_does(segmenter):
+    """The floor cut keeps the floor from being taken for the table; with no plane above it, the
+    floor is the support and a box standing on it is the one cluster."""
+    rng = np.random.default_rng(0)
+    floor = _slab(rng, [-0.5, -0.5, -0.001], [0.5, 0.5, 0.001], 6000)
+    box = _slab(rng, [0.1, 0.1, 0.015], [0.16, 0.16, 0.06], 600)  # 6 cm box on the floor
+    result = segmenter.segment(_cloud(floor, box))
+    assert result.table is not None and abs(result.table.height) < 0.002
+    assert result.diagnostics["support"] == "floor"
+    assert len(result.clusters) == 1 and len(result.clusters[0].points) == 600
+    table = _slab(rng, [-0.4, -0.4, 0.699], [0.0, 0.0, 0.701], 4000)
+    mug = _slab(rng, [-0.2, -0.2, 0.72], [-0.15, -0.15, 0.8], 300)
+    result = segmenter.segment(_cloud(floor, box, table, mug))
+    assert abs(result.table.height - 0.7) < 0.002 and "support" not in result.diagnostics
+    assert len(result.clusters) == 1 and len(result.clusters[0].points) == 300
+    # a later view that shows only the floor keeps the tracked table and finds nothing on the floor
+    result = segmenter.segment(_cloud(floor, box), table=result.table)
+    assert abs(result.table.height - 0.7) < 0.002 and result.clusters == []
+    # a table seen after the floor was taken for the support (a first view that missed it) replaces it
+    on_floor = segmenter.segment(_cloud(floor, box)).table
+    result = segmenter.segment(_cloud(floor, table, mug), table=on_floor)
+    assert abs(result.table.height - 0.7) < 0.002 and len(result.clusters) == 1
+
+
 def test_euclidean_clusters_separate_and_drop_small():
     rng = np.random.default_rng(0)
     a = rng.normal([0, 0, 0], 0.005, (200, 3))

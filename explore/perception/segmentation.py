@@ -3,7 +3,8 @@
 The pipeline follows Görner's tabletop segmentation (digest §2) and Kriegel's
 pre-segmentation for recognition (thesis §3.4):
 
-1. floor cut: drop points below ``min_plane_height`` (world z; Görner 0.20 m);
+1. floor cut: look for the support plane above ``min_plane_height`` (world z; Görner 0.20 m), and
+   below it only when there is none above (objects on the floor);
 2. RANSAC plane with distance threshold 0.02 m and N = log(1 − p) / log(1 − w³) iterations
    (p = success probability, w = inlier fraction; p = 0.99, w = 1/3 gives 122 ≈ Görner's
    125); planes tilted more than ``max_tilt_deg`` from the up vector are skipped;
@@ -325,9 +326,15 @@ class PlaneClusterSegmenter(Segmenter):
         is the same plane; a view that sees too little of the table uses ``table`` as it is.
         """
         cloud = scans if isinstance(scans, Cloud) else Cloud.from_scans(scans, view_ids)
-        cloud = cloud.subset(cloud.points[:, 2] >= self.min_plane_height)
         diag: dict[str, Any] = {"points": len(cloud.points), "ransac_iterations": self.iterations}
-        found = self.find_table(cloud.points, diag)
+        above_floor = cloud.points[:, 2] >= self.min_plane_height
+        found = self.find_table(cloud.points[above_floor], diag)
+        on_floor = table is not None and table.height < self.min_plane_height
+        if found is not None and on_floor:
+            table, diag["table"] = None, "replaces the floor"  # the floor was the support for want of a table
+        elif found is None and (table is None or on_floor) and not above_floor.all():
+            found = self.find_table(cloud.points, diag)  # no table: the objects stand on the floor
+            diag["support"] = "floor"
         if table is not None:
             same = found is not None and same_plane(found, table, 2.0 * self.distance_threshold)
             diag["table"] = "merged" if same else "kept"
