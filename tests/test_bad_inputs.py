@@ -166,7 +166,9 @@ def test_a_signal_ends_with_the_results_so_far(command, sig, code, tmp_path) -> 
         args = [str(EXPLORE), "compare", "--tree", "model_object", "--worlds", "bunny_pedestal,duck_pedestal",
                 "--seeds", "3", "--jobs", "1", "--out", str(out)]
         ready = out / "results.csv"
-    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    # a suite started in the background without job control ignores SIGINT, and the child would inherit that
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and process.poll() is None:
         if ready.exists() and (command == "compare" or '"event": "integrated"' in ready.read_text()):
