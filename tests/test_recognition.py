@@ -124,6 +124,41 @@ def test_ppf_pose_clustering_leaves_out_references_without_votes():
     assert PPFRecognizer()._cluster_poses(poses, np.zeros(4, dtype=int), diameter=0.1) == []
 
 
+def test_ppf_votes_equal_the_dense_accumulator_and_pairs_the_brute_force_search():
+    """The compiled voting gives each reference the cell ``argmax`` of a dense (n_ref, n_m * n_alpha)
+    vote array gives (the lowest cell on a tie; references without a match: cell 0, no vote), and
+    the pairs found in the k-d tree are all pairs within the radius, in reference-then-point order."""
+    from explore.perception.ppf_votes import best_votes, pairs_within
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(0.0, 0.1, (400, 3))
+    refs = np.sort(rng.choice(400, 100, replace=False))
+    ri, pi = pairs_within(points, refs, 0.03)
+    all_ri, all_pi = np.repeat(np.arange(100), 400), np.tile(np.arange(400), 100)
+    keep = (np.linalg.norm(points[refs[all_ri]] - points[all_pi], axis=1) <= 0.03) & (refs[all_ri] != all_pi)
+    close = np.linalg.norm(points[refs[ri]] - points[pi], axis=1) <= 0.03
+    np.testing.assert_array_equal(ri[close], all_ri[keep])
+    np.testing.assert_array_equal(pi[close], all_pi[keep])
+
+    n_ref, n_m, na = 100, 7, 5
+    ri = np.sort(rng.integers(0, n_ref - 10, 3000))  # the last references have no pair
+    counts = rng.integers(0, 4, len(ri))
+    hi = np.cumsum(counts)
+    lo = hi - counts
+    model_refs = rng.integers(0, n_m, int(hi[-1])).astype(np.int32)
+    model_alphas = rng.choice(np.linspace(-np.pi, np.pi, 9), int(hi[-1]))  # few values: many ties
+    scene_alphas = rng.choice(np.linspace(-np.pi, np.pi, 5), len(ri))
+    best, votes = best_votes(ri, lo, hi, model_alphas, model_refs, scene_alphas, n_ref, n_m, na)
+    pair = np.repeat(np.arange(len(ri)), counts)
+    alpha = model_alphas - scene_alphas[pair]
+    cell = model_refs.astype(np.int64) * na + np.floor((alpha + np.pi) / (2.0 * np.pi) * na).astype(np.int64) % na
+    dense = np.zeros((n_ref, n_m * na), dtype=np.int64)
+    np.add.at(dense, (ri[pair], cell), 1)
+    np.testing.assert_array_equal(best, dense.argmax(axis=1))
+    np.testing.assert_array_equal(votes, dense.max(axis=1))
+    assert votes[-10:].sum() == 0 and (votes[:-10] > 0).any()
+
+
 def test_ppf_ranks_right_model_on_most_clusters(scene):
     scan, clusters, models, truth = scene
     recognizer = PPFRecognizer()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -14,6 +14,7 @@ import numpy as np
 from explore.core import Array, Points3, Pose, mean_pose
 from explore.perception.hypotheses import Q_H_MIN, Hypothesis, Model
 from explore.perception.model_data import ModelCloud, has_normal, model_cloud, oriented
+from explore.perception.ppf_votes import best_votes, pairs_within
 from explore.perception.recognizer_base import RecognizerBase
 from explore.perception.segmentation import Cluster
 from explore.perception.verification import (
@@ -60,7 +61,8 @@ def _alpha(r: np.ndarray, t: Points3, ref: np.ndarray, other: Points3) -> Array:
 
 @dataclass
 class PPFTable:
-    """Hash table of a model's point pairs: sorted keys with (reference index, alpha_m)."""
+    """Hash table of a model's point pairs: sorted keys with (reference index, alpha_m); the distinct
+    keys and where each one's entries start (``starts`` ends with the number of entries)."""
 
     cloud: ModelCloud
     keys: np.ndarray
@@ -71,6 +73,18 @@ class PPFTable:
     distance_step: float
     angle_bins: int
     diameter: float
+    distinct: np.ndarray = field(init=False)
+    starts: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.distinct, first = np.unique(self.keys, return_index=True)
+        self.starts = np.append(first, len(self.keys))
+
+    def entries(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi): the table entries ``lo:hi`` of each key (lo = hi where the table has none)."""
+        at = np.minimum(np.searchsorted(self.distinct, keys), len(self.distinct) - 1)
+        found = self.distinct[at] == keys
+        return np.where(found, self.starts[at], 0), np.where(found, self.starts[at + 1], 0)
 
 
 class PPFRecognizer(RecognizerBase):
@@ -180,40 +194,28 @@ class PPFRecognizer(RecognizerBase):
         rng = np.random.default_rng(self.seed)
         n_ref = max(1, int(round(self.reference_fraction * len(sp))))
         refs = np.sort(rng.choice(len(sp), size=n_ref, replace=False))
-        ri = np.repeat(np.arange(n_ref), len(sp))
-        pi = np.tile(np.arange(len(sp)), n_ref)
-        valid = refs[ri] != pi
-        ri, pi = ri[valid], pi[valid]
+        ri, pi = pairs_within(sp, refs, table.diameter)
         dist, f1, f2, f3 = _pair_features(sp[refs[ri]], sn[refs[ri]], sp[pi], sn[pi])
         close = dist <= table.diameter
         ri, pi, dist, f1, f2, f3 = ri[close], pi[close], dist[close], f1[close], f2[close], f3[close]
         keys = self._keys(dist, f1, f2, f3, table.distance_step)
         rot_s, trans_s = _align_to_x(sp[refs], sn[refs])
         alpha_s = _alpha(rot_s, trans_s, ri, sp[pi])
-        lo = np.searchsorted(table.keys, keys, "left")
-        hi = np.searchsorted(table.keys, keys, "right")
-        counts = hi - lo
-        total = int(counts.sum())
+        lo, hi = table.entries(keys)
+        total = int((hi - lo).sum())
         diag: dict[str, Any] = {"scene_points": len(sp), "references": n_ref, "matches": total}
         if total == 0:
             return []
-        pair = np.repeat(np.arange(len(keys)), counts)
-        entry = np.repeat(lo, counts) + (np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts))
-        alpha = table.alphas[entry] - alpha_s[pair]  # rotation about x taking the model partner onto the scene's
         na = self.alpha_bins
-        abin = (np.floor((alpha + math.pi) / (2.0 * math.pi) * na).astype(np.int64)) % na
-        n_m = len(table.cloud.points)
-        flat = (ri[pair].astype(np.int64) * n_m + table.refs[entry]) * na + abin
-        acc = np.bincount(flat, minlength=n_ref * n_m * na).reshape(n_ref, n_m * na)
-        best = acc.argmax(axis=1)
-        votes = acc[np.arange(n_ref), best]
+        best, votes = best_votes(ri, lo, hi, table.alphas, table.refs, alpha_s, n_ref, len(table.cloud.points), na)
         m_ref, a_best = best // na, best % na
         angle = (a_best + 0.5) * 2.0 * math.pi / na - math.pi
-        poses = np.empty((n_ref, 4, 4))
-        for k in range(n_ref):
-            poses[k] = self._pose(rot_s[k], trans_s[k], table.rotations[m_ref[k]], table.translations[m_ref[k]],
+        voted = np.flatnonzero(votes > 0)  # a reference none of whose pairs matched has no pose
+        poses = np.empty((len(voted), 4, 4))
+        for i, k in enumerate(voted):
+            poses[i] = self._pose(rot_s[k], trans_s[k], table.rotations[m_ref[k]], table.translations[m_ref[k]],
                                   -angle[k])
-        candidates = self._cluster_poses(poses, votes, table.diameter)
+        candidates = self._cluster_poses(poses, votes[voted], table.diameter, keep=self.peaks)
         diag["vote_seconds"] = time.perf_counter() - started
         chosen = [(pose, {**diag, "votes": int(v)}) for pose, v in candidates[: self.peaks]]
         return self._finish(cluster, model, table.cloud, chosen, scans, started)
@@ -229,28 +231,32 @@ class PPFRecognizer(RecognizerBase):
         out[:3, 3] = r_s.T @ (rx @ t_m - t_s)
         return out
 
-    def _cluster_poses(self, poses: np.ndarray, votes: np.ndarray, diameter: float) -> list[tuple[Pose, int]]:
-        """Greedy pose clustering (Drost §3.4): sum the votes of similar poses, average each cluster.
+    def _cluster_poses(self, poses: np.ndarray, votes: np.ndarray, diameter: float,
+                       keep: int | None = None) -> list[tuple[Pose, int]]:
+        """Greedy pose clustering (Drost §3.4): sum the votes of similar poses, average each cluster;
+        the ``keep`` clusters with the most votes (all by default), most first.
 
-        A reference point none of whose pairs matched has no vote and no pose; it is left out (a
-        cluster of such points alone has no weight to average with)."""
+        A pose joins the first cluster whose first pose lies within the translation and rotation
+        limits. A reference point none of whose pairs matched has no vote and no pose; it is left
+        out (a cluster of such points alone has no weight to average with)."""
         voted = votes > 0
         poses, votes = poses[voted], votes[voted]
         order = np.argsort(-votes, kind="stable")
         max_t = self.cluster_translation * diameter
         max_r = math.radians(self.cluster_rotation_deg)
+        head_t, head_r = np.empty((len(order), 3)), np.empty((len(order), 3, 3))
         groups: list[list[int]] = []
         for k in order:
-            for group in groups:
-                head = poses[group[0]]
-                if np.linalg.norm(poses[k, :3, 3] - head[:3, 3]) > max_t:
-                    continue
-                r = head[:3, :3].T @ poses[k, :3, :3]
-                if math.acos(float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))) <= max_r:
-                    group.append(int(k))
-                    break
+            n = len(groups)
+            near = np.flatnonzero(np.linalg.norm(head_t[:n] - poses[k, :3, 3], axis=1) <= max_t)
+            trace = np.einsum("nij,ij->n", head_r[near], poses[k, :3, :3])  # trace(head^T R)
+            turned = np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
+            within = near[turned <= max_r]
+            if len(within):
+                groups[int(within[0])].append(int(k))
             else:
+                head_t[n], head_r[n] = poses[k, :3, 3], poses[k, :3, :3]
                 groups.append([int(k)])
-        scored = [(mean_pose(poses[g], votes[g]), int(votes[g].sum())) for g in groups]
-        scored.sort(key=lambda item: -item[1])
-        return scored
+        totals = [int(votes[g].sum()) for g in groups]
+        ranked = sorted(range(len(groups)), key=lambda g: -totals[g])[:keep]
+        return [(mean_pose(poses[groups[g]], votes[groups[g]]), totals[g]) for g in ranked]
