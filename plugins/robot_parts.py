@@ -128,8 +128,9 @@ class ArmChain:
 
     def set(self, q: Array) -> None:
         """Set the joints (the robot's cached configuration is then unknown)."""
-        for j, v in zip(self.joints, q, strict=True):
-            p.resetJointState(self.body, j, float(v), physicsClientId=self.robot.client)
+        if len(q) != len(self.joints):
+            raise ValueError(f"{len(q)} joint values for {len(self.joints)} joints")
+        p.resetJointStatesMultiDof(self.body, self.joints, [[float(v)] for v in q], physicsClientId=self.robot.client)
         self.robot._state = None
 
     def flange_pose(self, q: Array | None = None) -> Pose:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.core import Pose, captured_output, pose_from
+from explore.core import Pose, captured_output
 from explore.sim.meshes import TriMesh, box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 
 with captured_output(stdout=True):  # pybullet prints its build time on import
@@ -20,7 +20,10 @@ def quaternion_matrix(quat: tuple[float, ...]) -> np.ndarray:
 
 
 def frame_pose(position: tuple[float, ...], quat: tuple[float, ...]) -> Pose:
-    return pose_from(np.asarray(position), quaternion_matrix(quat))
+    """world_T_frame of a pybullet position and quaternion (one array built, as IK calls it a million times)."""
+    m = p.getMatrixFromQuaternion(quat)
+    x, y, z = position
+    return np.array([[m[0], m[1], m[2], x], [m[3], m[4], m[5], y], [m[6], m[7], m[8], z], [0.0, 0.0, 0.0, 1.0]])
 
 
 def link_frame_pose(body: int, link: int, client: int) -> Pose:
