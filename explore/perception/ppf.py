@@ -217,7 +217,7 @@ class PPFRecognizer(RecognizerBase):
                                   -angle[k])
         candidates = self._cluster_poses(poses, votes[voted], table.diameter, keep=self.peaks)
         diag["vote_seconds"] = time.perf_counter() - started
-        chosen = [(pose, {**diag, "votes": int(v)}) for pose, v in candidates[: self.peaks]]
+        chosen = [(pose, {**diag, "votes": int(v)}) for pose, v in candidates]
         return self._finish(cluster, model, table.cloud, chosen, scans, started)
 
     @staticmethod

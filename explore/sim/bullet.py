@@ -15,10 +15,6 @@ with captured_output(stdout=True):  # pybullet prints its build time on import
 pybullet = p
 
 
-def quaternion_matrix(quat: tuple[float, ...]) -> np.ndarray:
-    return np.asarray(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
-
-
 def frame_pose(position: tuple[float, ...], quat: tuple[float, ...]) -> Pose:
     """world_T_frame of a pybullet position and quaternion (one array built, as IK calls it a million times)."""
     m = p.getMatrixFromQuaternion(quat)
