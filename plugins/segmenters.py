@@ -17,7 +17,8 @@ class PlaneClusters(PlaneClusterSegmenter):
         Param("distance_threshold", float, 0.02, "m", "RANSAC inlier distance (Görner 0.02 m)", low=1e-4),
         Param("success_probability", float, 0.99, "", "p in N = log(1-p)/log(1-w^3)", low=0.5, high=0.999999),
         Param("inlier_fraction", float, 1.0 / 3.0, "", "w in N = log(1-p)/log(1-w^3)", low=0.01, high=1.0),
-        Param("min_plane_height", float, 0.2, "m", "floor cut: ignore points below this world z", low=-100.0),
+        Param("min_plane_height", float, 0.2, "m", "floor cut: the support plane is searched above this world z "
+              "(below it only when there is none)", low=-100.0),
         Param("max_tilt_deg", float, 20.0, "deg", "largest tilt of a support plane from +z", low=0.0, high=90.0),
         Param("table_tolerance", float, 0.03, "m", "connectivity of the table inliers", low=1e-4),
         Param("min_table_points", int, 200, "", "smallest table (points)", low=3),
