@@ -27,7 +27,6 @@ from explore.core import look_at
 from explore.perception import DepthProcessing, ObjectDatabase
 from explore.perception.model_data import oriented
 from explore.perception.ppf import _align_to_x, _alpha, _pair_features
-from explore.perception.ppf_votes import best_votes, pairs_within
 from explore.perception.verification import o3d_cloud
 from explore.runtime import Registry
 from explore.sim import Simulation
@@ -56,15 +55,17 @@ def _best(fn, args: tuple, repeats: int) -> tuple[float, object]:
     return min(times), out
 
 
-def dense_votes(sp, sn, refs, table, na: int):
+def dense_votes(recognizer, sp, sn, refs, table):
     """The reference: every scene pair, one (n_ref, n_m * n_alpha) vote array, ``argmax``."""
+    na = recognizer.alpha_bins
     n_ref, n = len(refs), len(sp)
     ri, pi = np.repeat(np.arange(n_ref), n), np.tile(np.arange(n), n_ref)
     valid = refs[ri] != pi
     ri, pi = ri[valid], pi[valid]
     dist, f1, f2, f3 = _pair_features(sp[refs[ri]], sn[refs[ri]], sp[pi], sn[pi])
     close = dist <= table.diameter
-    ri, pi, keys = ri[close], pi[close], _keys(dist[close], f1[close], f2[close], f3[close], table)
+    ri, pi = ri[close], pi[close]
+    keys = recognizer._keys(dist[close], f1[close], f2[close], f3[close], table.distance_step)
     rot_s, trans_s = _align_to_x(sp[refs], sn[refs])
     alpha_s = _alpha(rot_s, trans_s, ri, sp[pi])
     lo, hi = np.searchsorted(table.keys, keys, "left"), np.searchsorted(table.keys, keys, "right")
@@ -78,26 +79,7 @@ def dense_votes(sp, sn, refs, table, na: int):
     flat = (ri[pair].astype(np.int64) * n_m + table.refs[entry]) * na + abin
     acc = np.bincount(flat, minlength=n_ref * n_m * na).reshape(n_ref, n_m * na)
     best = acc.argmax(axis=1)
-    return best, acc[np.arange(n_ref), best], acc.nbytes, total
-
-
-def library_votes(sp, sn, refs, table, na: int):
-    ri, pi = pairs_within(sp, refs, table.diameter)
-    dist, f1, f2, f3 = _pair_features(sp[refs[ri]], sn[refs[ri]], sp[pi], sn[pi])
-    close = dist <= table.diameter
-    ri, pi, keys = ri[close], pi[close], _keys(dist[close], f1[close], f2[close], f3[close], table)
-    rot_s, trans_s = _align_to_x(sp[refs], sn[refs])
-    alpha_s = _alpha(rot_s, trans_s, ri, sp[pi])
-    lo, hi = table.entries(keys)
-    best, votes = best_votes(ri, lo, hi, table.alphas, table.refs, alpha_s, len(refs), len(table.cloud.points), na)
-    return best, votes, len(ri)
-
-
-def _keys(dist, f1, f2, f3, table):
-    nb = table.angle_bins
-    scale = nb / math.pi
-    a, b, c = (np.minimum((f * scale).astype(np.int64), nb - 1) for f in (f1, f2, f3))
-    return (((dist / table.distance_step).astype(np.int64) * nb + a) * nb + b) * nb + c
+    return best, acc[np.arange(n_ref), best], acc.nbytes, total, len(ri)
 
 
 def measure(repeats: int) -> list[dict]:
@@ -124,10 +106,10 @@ def measure(repeats: int) -> list[dict]:
         table = recognizer.table(model)
         sp, sn = oriented(o3d_cloud(cluster.points, cluster.normals).voxel_down_sample(table.distance_step))
         refs = np.sort(np.random.default_rng(0).choice(len(sp), max(1, round(0.25 * len(sp))), replace=False))
-        args = (sp, sn, refs, table, recognizer.alpha_bins)
-        library_votes(*args)  # compile
-        ours, (best, votes, pairs) = _best(library_votes, args, repeats)
-        dense, (d_best, d_votes, nbytes, matches) = _best(dense_votes, args, repeats)
+        args = (sp, sn, refs, table)
+        recognizer.vote(*args)  # compile
+        ours, (best, votes, _, _, _) = _best(recognizer.vote, args, repeats)
+        dense, (d_best, d_votes, nbytes, matches, pairs) = _best(dense_votes, (recognizer, *args), repeats)
         rows.append({
             "model": model.name, "model_points": len(table.cloud.points), "scene_points": len(sp),
             "references": len(refs), "pairs_within_diameter": pairs, "matches": matches,

@@ -194,20 +194,11 @@ class PPFRecognizer(RecognizerBase):
         rng = np.random.default_rng(self.seed)
         n_ref = max(1, int(round(self.reference_fraction * len(sp))))
         refs = np.sort(rng.choice(len(sp), size=n_ref, replace=False))
-        ri, pi = pairs_within(sp, refs, table.diameter)
-        dist, f1, f2, f3 = _pair_features(sp[refs[ri]], sn[refs[ri]], sp[pi], sn[pi])
-        close = dist <= table.diameter
-        ri, pi, dist, f1, f2, f3 = ri[close], pi[close], dist[close], f1[close], f2[close], f3[close]
-        keys = self._keys(dist, f1, f2, f3, table.distance_step)
-        rot_s, trans_s = _align_to_x(sp[refs], sn[refs])
-        alpha_s = _alpha(rot_s, trans_s, ri, sp[pi])
-        lo, hi = table.entries(keys)
-        total = int((hi - lo).sum())
+        best, votes, total, rot_s, trans_s = self.vote(sp, sn, refs, table)
         diag: dict[str, Any] = {"scene_points": len(sp), "references": n_ref, "matches": total}
         if total == 0:
             return []
         na = self.alpha_bins
-        best, votes = best_votes(ri, lo, hi, table.alphas, table.refs, alpha_s, n_ref, len(table.cloud.points), na)
         m_ref, a_best = best // na, best % na
         angle = (a_best + 0.5) * 2.0 * math.pi / na - math.pi
         voted = np.flatnonzero(votes > 0)  # a reference none of whose pairs matched has no pose
@@ -219,6 +210,26 @@ class PPFRecognizer(RecognizerBase):
         diag["vote_seconds"] = time.perf_counter() - started
         chosen = [(pose, {**diag, "votes": int(v)}) for pose, v in candidates]
         return self._finish(cluster, model, table.cloud, chosen, scans, started)
+
+    def vote(self, sp: Points3, sn: Points3, refs: np.ndarray, table: PPFTable
+             ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, Points3]:
+        """Drost's voting (Sec. 3.3) for the scene references ``refs`` of the oriented points (sp, sn):
+        per reference the best accumulator cell (model reference * alpha_bins + alpha bin) and its
+        votes, the number of table matches, and the references' alignments T_{s→g} (R, t)."""
+        ri, pi = pairs_within(sp, refs, table.diameter)
+        dist, f1, f2, f3 = _pair_features(sp[refs[ri]], sn[refs[ri]], sp[pi], sn[pi])
+        close = dist <= table.diameter
+        ri, pi, dist, f1, f2, f3 = ri[close], pi[close], dist[close], f1[close], f2[close], f3[close]
+        keys = self._keys(dist, f1, f2, f3, table.distance_step)
+        rot_s, trans_s = _align_to_x(sp[refs], sn[refs])
+        lo, hi = table.entries(keys)
+        total = int((hi - lo).sum())
+        if total == 0:
+            return np.zeros(len(refs), np.int64), np.zeros(len(refs), np.int64), 0, rot_s, trans_s
+        alpha_s = _alpha(rot_s, trans_s, ri, sp[pi])
+        best, votes = best_votes(ri, lo, hi, table.alphas, table.refs, alpha_s, len(refs), len(table.cloud.points),
+                                 self.alpha_bins)
+        return best, votes, total, rot_s, trans_s
 
     @staticmethod
     def _pose(r_s: np.ndarray, t_s: Array, r_m: np.ndarray, t_m: Array, alpha: float) -> Pose:
