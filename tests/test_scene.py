@@ -865,3 +865,30 @@ def test_views_that_see_a_mug_turned_confirm_the_pose_of_all_views_together() ->
     obj.view_hypotheses = [(22, Hypothesis("mug", near, 0.82, "ppf")), (25, Hypothesis("mug", turned, 0.83, "ppf"))]
     obj.rivals = [Hypothesis("cup", turned, 0.7, "ppf")]
     assert recognition._confirming_the_merged_pose(obj) == []
+
+
+def test_on_a_shelf_the_support_is_the_board_the_region_sits_on_and_the_shelf_is_no_object(
+        open_world, registry, tmp_path):
+    """The shelf's lower board (or no level plane at all, with the back and sides in view) is what the
+    whole view offers; the support is searched within the region instead (the middle board, top at
+    0.80 m); every cluster is one of the three objects, not the back or sides seen through the noise;
+    a view from behind the back wall or from below the board is not taken (it sees the shelf)."""
+    with open_world("shelf") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+        db.seed_from_world(sim)
+        scene = SceneSession(sim, registry, db, seed=0)
+        scene.viewing.overview()
+        objects = scene.segment()
+        assert scene.table is not None and scene.table.height == pytest.approx(0.80, abs=0.01)
+        truth = {b.name: np.mean(b.mesh.bounds, axis=0) for b in sim.objects()}
+        for obj in list(objects):
+            scene.viewing.next_view(obj, "another side")
+        objects = scene.segment()
+        objects.sort(key=lambda o: o.cluster.centroid[0])
+        offsets = [np.linalg.norm(np.mean(o.cluster.aabb, axis=0)[:2] - truth[name][:2])
+                   for o, name in zip(objects, ["mug", "duck", "sorter"], strict=True)]
+        assert max(offsets) < 0.03, offsets  # the seen part's box centre: the back is hidden
+        assert all(v.believed[1, 3] < 0.0 for v in scene.views)  # every view from the open front
+        mug = objects[0].cluster.points
+        assert not scene.viewing.in_sight(np.array([-0.22, 0.7, 1.0]), mug)  # behind the back wall
+        assert not scene.viewing.in_sight(np.array([-0.22, -0.45, 0.6]), mug)  # below the middle board
+        assert scene.viewing.in_sight(np.array([-0.22, -0.8, 1.0]), mug)

@@ -37,6 +37,7 @@ The session never reads the ground truth; :meth:`SceneSession.metrics` does, thr
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -44,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, NO_CANDIDATES, Points3
-from explore.perception import Cluster, Model, Table, require_role, vote_points
+from explore.perception import Cloud, Cluster, Model, Segmentation, Table, require_role, vote_points
 from explore.scene.database_update import DatabaseUpdate
 from explore.scene.motion import Mover
 from explore.scene.object_modelling import ObjectModelling
@@ -66,6 +67,11 @@ from explore.scene.scene_objects import (
 )
 from explore.scene.settings import SceneSettings
 from explore.scene.viewing import ViewTaking
+
+REGION_SUPPORT_GAP = 0.05  # m: how far above its support a world's region may begin
+ENVIRONMENT_MARGIN = 0.005  # m: points this near the known environment (or outside the region) are not an object's
+WALL_MARGIN = 0.02  # m: nor points this near its upright faces (the segmenter's plane distance threshold)
+UPRIGHT_NORMAL_Z = math.cos(math.radians(45.0))  # |n_z| below this: an upright face
 
 
 class SceneSession:
@@ -215,16 +221,59 @@ class SceneSession:
         lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
         for index in self.pending_views:
             result = self.segmenter.segment(self.views[index].scan, view_ids=[index], table=self.table)
+            if result.table is None or not self._supports_region(result.table):
+                result = self._segment_region_band(index, result)
             if result.table is not None:
                 self.table = result.table
             for cluster in result.clusters:
-                centre = cluster.centroid
-                if np.all(centre >= lo) and np.all(centre <= hi):
+                cluster = self._off_environment(cluster, lo, hi)
+                if cluster is not None and np.all(cluster.centroid >= lo) and np.all(cluster.centroid <= hi):
                     self._associate(cluster)
         self.pending_views = []
         self._merge_fragments()
         self.timed("segment_s", start)
         return self.candidates()
+
+    def _off_environment(self, cluster: Cluster, lo: np.ndarray, hi: np.ndarray) -> Cluster | None:
+        """The cluster without the points that are not an object's: outside the region (the world says
+        its objects lie within it), within ``ENVIRONMENT_MARGIN`` of the known environment, or within
+        ``WALL_MARGIN`` of its upright faces (a shelf's back and sides, seen at a slant through the depth
+        noise; a horizontal face is the support, whose band the segmenter has cut); None if none is left."""
+        points = cluster.points
+        keep = np.all((points >= lo - ENVIRONMENT_MARGIN) & (points <= hi + ENVIRONMENT_MARGIN), axis=1)
+        if keep.any():
+            nearest, normals = self.sim.environment_caster().closest(points[keep])
+            distance = np.linalg.norm(nearest - points[keep], axis=1)
+            upright = np.abs(normals[:, 2]) < UPRIGHT_NORMAL_Z
+            keep[keep] = (distance > ENVIRONMENT_MARGIN) & ~(upright & (distance <= WALL_MARGIN))
+        if keep.all():
+            return cluster
+        return cluster.subset(keep) if keep.any() else None
+
+    def _supports_region(self, table: Table) -> bool:
+        """Whether ``table`` can be what the region's objects stand on: the region's floor lies no more
+        than ``REGION_SUPPORT_GAP`` above the plane, and the plane not above the region's top (a
+        room's region may reach down to the floor, below its tables)."""
+        lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
+        floor = np.array([[0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]]])
+        gap = float(table.heights(floor)[0])
+        return -(hi[2] - lo[2]) <= gap <= REGION_SUPPORT_GAP
+
+    def _segment_region_band(self, index: int, first: Segmentation) -> Segmentation:
+        """Segment view ``index`` again on its points within the region's footprint, from
+        ``REGION_SUPPORT_GAP`` below the region's floor to its top: the view's planes were another level
+        (a shelf's lower board, the floor under a table the region sits on) or upright (a shelf's back
+        and sides), so the support is searched where the world says the objects are. Keeps ``first``
+        if that finds none either."""
+        lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
+        cloud = Cloud.from_scans(self.views[index].scan, [index])
+        band_lo = np.array([lo[0], lo[1], lo[2] - REGION_SUPPORT_GAP])
+        inside = np.all((cloud.points >= band_lo) & (cloud.points <= hi), axis=1)
+        again = self.segmenter.segment(cloud.subset(inside), table=self.table)
+        if again.table is None:
+            return first
+        again.diagnostics["support"] = "region band"
+        return again
 
     def candidates(self) -> list[SceneObject]:
         """The objects large enough to be explained (smaller clusters are noise)."""

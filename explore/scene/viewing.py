@@ -132,7 +132,8 @@ class ViewTaking:
         seen = np.array([scene.views[v].believed[:3, 3] for v in obj.cluster.view_ids])
         directions = 0
         for index in order_by_novelty(rings[0], seen, centre):
-            if not scene.mover.plausible(rings[0][index][:3, 3], centre):
+            eye = rings[0][index][:3, 3]
+            if not scene.mover.plausible(eye, centre) or not self.in_sight(eye, obj.cluster.points):
                 continue
             directions += 1
             for d, ring in zip(ladder, rings, strict=True):
@@ -145,6 +146,19 @@ class ViewTaking:
             if directions >= 2 * scene.settings.reach_tries:
                 break
         return None
+
+    def in_sight(self, eye: np.ndarray, points: np.ndarray, samples: int = 64, tolerance: float = 0.01) -> bool:
+        """Whether the known environment leaves at least half of ``points`` (up to ``samples`` of them,
+        evenly picked) in sight from ``eye``: a view from behind a shelf's back wall, from below its board
+        or from inside a cabinet sees the furniture, not the object."""
+        if len(points) == 0:
+            return True
+        chosen = points[np.linspace(0, len(points) - 1, min(samples, len(points))).astype(int)]
+        offsets = chosen - eye
+        lengths = np.linalg.norm(offsets, axis=1)
+        hit, _, _ = self.scene.sim.environment_caster().cast(np.repeat(eye[None], len(chosen), 0),
+                                                            offsets / lengths[:, None])
+        return bool(np.mean(hit >= lengths - tolerance) >= 0.5)
 
     def look_closer(self, views: int = 2) -> tuple[int, int]:
         """Views aimed at the objects seen with fewer than ``min_points`` points, up to ``views`` per

@@ -134,6 +134,7 @@ class Simulation:
             self.close()
             raise
         self.raycaster = RayCaster([b.mesh for b in self.bodies])
+        self._environment_caster: RayCaster | None = None
         self.sensor = None
         self.robot = None
         if registry is not None:
@@ -326,6 +327,12 @@ class Simulation:
     def environment_ids(self) -> list[int]:
         """pybullet ids of the known static environment (what a planner may know)."""
         return [b.body_id for b in self.bodies if not b.is_object]
+
+    def environment_caster(self) -> RayCaster:
+        """A ray caster over the known static environment (what a planner may know), built once."""
+        if self._environment_caster is None:
+            self._environment_caster = RayCaster([b.mesh for b in self.bodies if not b.is_object], nthreads=1)
+        return self._environment_caster
 
     def object_ids(self) -> list[int]:
         return [b.body_id for b in self.bodies if b.is_object]
