@@ -107,7 +107,8 @@ class ObjectModelling:
             if candidate is None:
                 break
             start = target_start(candidate.target)[:3, 3]
-            if not scene.mover.plausible(start, centre) or scene.viewing.already_taken(candidate.target):
+            if (not scene.mover.plausible(start, centre) or scene.viewing.already_taken(candidate.target)
+                    or not scene.viewing.in_sight(start, obj.cluster.points)):
                 continue
             tries += 1
             reached = scene.mover.reach(candidate.target)
