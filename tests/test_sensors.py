@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from explore.core import look_at
-from explore.sim import ScanPath, WorldSpec, load_world_spec, sigma_kinect, sigma_laser_poly
+from explore.sim import RayCaster, ScanPath, WorldSpec, load_world_spec, sigma_kinect, sigma_laser_poly
 
 WALL = """
 name: wall
@@ -107,6 +107,17 @@ def test_colour_comes_from_the_renderer(open_world, registry, rng) -> None:
         assert scan.colors is not None and scan.colors.shape == (len(scan), 3)
         assert scan.colors[scan.hits].std() > 5  # not a flat image
         assert len(scan.to_open3d().colors) == scan.hits.sum()
+
+
+def test_a_caster_over_no_mesh_finds_nothing_near_or_in_the_way() -> None:
+    """A world without known environment: every point is infinitely far from it and every ray misses
+    (Open3D's closest-point query on an empty scene returns uninitialised memory)."""
+    caster = RayCaster([], nthreads=1)
+    points = np.array([[0.1, 0.2, 0.3], [0.0, 0.0, 0.0]])
+    nearest, normals = caster.closest(points)
+    assert np.all(np.isinf(nearest)) and np.all(normals == 0.0)
+    hit, index, _ = caster.cast(points, np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+    assert np.all(np.isinf(hit)) and np.all(index == -1)
 
 
 def test_world_spec_is_a_value(tmp_path) -> None:

@@ -66,8 +66,12 @@ class RayCaster:
         return t_hit, index, normals
 
     def closest(self, points: Points3) -> tuple[Points3, Points3]:
-        """The nearest surface point of every query point and the normal of its triangle."""
+        """The nearest surface point of every query point and the normal of its triangle (inf and 0
+        with no mesh: Open3D would return uninitialised memory)."""
         import open3d as o3d
+
+        if not self._geometry_to_index:
+            return np.full((len(points), 3), np.inf), np.zeros((len(points), 3))
 
         result = self._scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, dtype=np.float32)))
         return result["points"].numpy().astype(np.float64), result["primitive_normals"].numpy().astype(np.float64)
