@@ -221,8 +221,8 @@ class SceneSession:
         lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
         for index in self.pending_views:
             result = self.segmenter.segment(self.views[index].scan, view_ids=[index], table=self.table)
-            if result.table is None or not self._supports_region(result.table):
-                result = self._segment_region_band(index, result)
+            if result.table is None or not self._supports_region(result.table, lo, hi):
+                result = self._segment_region_band(index, result, lo, hi)
             if result.table is not None:
                 self.table = result.table
             for cluster in result.clusters:
@@ -250,22 +250,21 @@ class SceneSession:
             return cluster
         return cluster.subset(keep) if keep.any() else None
 
-    def _supports_region(self, table: Table) -> bool:
-        """Whether ``table`` can be what the region's objects stand on: the region's floor lies no more
-        than ``REGION_SUPPORT_GAP`` above the plane, and the plane not above the region's top (a
-        room's region may reach down to the floor, below its tables)."""
-        lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
+    @staticmethod
+    def _supports_region(table: Table, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """Whether ``table`` can be what the objects of the region ``lo``..``hi`` stand on: the region's
+        floor lies no more than ``REGION_SUPPORT_GAP`` above the plane, and the plane not above the
+        region's top (a room's region may reach down to the floor, below its tables)."""
         floor = np.array([[0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]]])
         gap = float(table.heights(floor)[0])
         return -(hi[2] - lo[2]) <= gap <= REGION_SUPPORT_GAP
 
-    def _segment_region_band(self, index: int, first: Segmentation) -> Segmentation:
+    def _segment_region_band(self, index: int, first: Segmentation, lo: np.ndarray, hi: np.ndarray) -> Segmentation:
         """Segment view ``index`` again on its points within the region's footprint, from
         ``REGION_SUPPORT_GAP`` below the region's floor to its top: the view's planes were another level
         (a shelf's lower board, the floor under a table the region sits on) or upright (a shelf's back
         and sides), so the support is searched where the world says the objects are. Keeps ``first``
         if that finds none either."""
-        lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
         cloud = Cloud.from_scans(self.views[index].scan, [index])
         band_lo = np.array([lo[0], lo[1], lo[2] - REGION_SUPPORT_GAP])
         inside = np.all((cloud.points >= band_lo) & (cloud.points <= hi), axis=1)
