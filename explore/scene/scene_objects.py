@@ -34,6 +34,7 @@ TARGET, SCAN_BUDGET, NO_PROGRESS, NO_VIEW, VIEW_BUDGET, RECOGNISED_INSTEAD = (
 
 
 FLOOR = (0.0, 0.0, 1.0, 0.0)  # the plane robot bases drive on (world z = 0)
+UPRIGHT_NORMAL_Z = math.cos(math.radians(45.0))  # a face whose normal has |n_z| below this is upright
 
 
 @dataclass
@@ -166,7 +167,7 @@ def environment_surface(sim: Any, spacing: float = 0.02, min_height: float = 0.0
         if body.is_object:
             continue
         p, n = sample_surface(body.mesh, spacing * spacing, seed=0)
-        upright = (np.abs(n[:, 2]) < math.cos(math.radians(45.0))) & (p[:, 2] > min_height)
+        upright = (np.abs(n[:, 2]) < UPRIGHT_NORMAL_Z) & (p[:, 2] > min_height)
         points.append(p[upright])
         normals.append(n[upright])
     if not points:

@@ -37,7 +37,6 @@ The session never reads the ground truth; :meth:`SceneSession.metrics` does, thr
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -59,6 +58,7 @@ from explore.scene.scene_objects import (
     NO_VIEW,
     UNEXPLAINED,
     UNKNOWN,
+    UPRIGHT_NORMAL_Z,
     VIEW_BUDGET,
     SceneObject,
     View,
@@ -71,7 +71,6 @@ from explore.scene.viewing import ViewTaking
 REGION_SUPPORT_GAP = 0.05  # m: how far above its support a world's region may begin
 ENVIRONMENT_MARGIN = 0.005  # m: points this near the known environment (or outside the region) are not an object's
 WALL_MARGIN = 0.02  # m: nor points this near its upright faces (the segmenter's plane distance threshold)
-UPRIGHT_NORMAL_Z = math.cos(math.radians(45.0))  # |n_z| below this: an upright face
 
 
 class SceneSession:
