@@ -40,6 +40,21 @@ def test_bunny_rests_on_the_pedestal_at_the_requested_size(bunny_sim) -> None:
     assert len(bunny_sim.environment_ids()) == 1
 
 
+def test_bodies_dropped_into_a_shelf_bin_rest_on_its_sloped_floor(open_world) -> None:
+    """In the Kiva pod (one mesh of four levels of bins) x, y, z with on_top_of drops a body from z
+    straight down: every body's nearest vertex ends 0.5 mm (the contact gap) above the floor of the
+    bin below it, which slopes by 2 cm from front to back, not on the pod's roof 2.37 m up."""
+    from explore.sim import RayCaster
+
+    with open_world("kiva_pod") as sim:
+        pod = RayCaster([b.mesh for b in sim.bodies if not b.is_object], nthreads=1)
+        for body in sim.objects():
+            vertices = body.mesh.vertices
+            fall, _, _ = pod.cast(vertices, np.tile([0.0, 0.0, -1.0], (len(vertices), 1)))
+            assert np.nanmin(np.where(np.isfinite(fall), fall, np.nan)) == pytest.approx(5e-4, abs=1e-6), body.name
+            assert 0.79 < vertices[:, 2].min() < 0.83, body.name
+
+
 def test_urdf_bodies_match_pybullet(open_world) -> None:
     from explore.sim import p
 
@@ -105,6 +120,10 @@ BAD = [
     ),
     (GOOD.replace("on_top_of: pedestal", "on_top_of: table"), "objects[0].on_top_of: no body named 'table'"),
     (GOOD.replace("region:", "regoin:"), "regoin: unknown field"),
+    (GOOD.replace("position: [0, 0], on_top_of", "position: [0, 0, 0.3], on_top_of"),
+     "objects[0].position: the body dropped from z = 0.25 (its lowest point) starts inside 'pedestal'"),
+    (GOOD.replace("position: [0, 0], on_top_of", "position: [0.15, 0, 0.7], on_top_of"),
+     "objects[0].position: nothing of 'pedestal' lies below the body dropped from z = 0.65"),
 ]
 
 

@@ -181,6 +181,27 @@ class Simulation:
                 return float(body.mesh.vertices[:, 2].max())
         raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
 
+    def _drop_onto(self, name: str, vertices: Points3, where: str) -> float:
+        """The height of the bounding-box centre at which a body whose vertices (world frame, at the
+        position it is dropped from) come to rest on ``name``, falling straight down: the shortest
+        fall of any vertex onto that body's surface. Picks one bin of a shelf with several, or a
+        sloped floor, where the top of the whole body (:meth:`_support_top`) would be the roof."""
+        support = next((b for b in self.bodies if b.name == name), None)
+        if support is None:
+            raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
+        down = np.tile([0.0, 0.0, -1.0], (len(vertices), 1))
+        fall, _, normal = RayCaster([support.mesh], nthreads=1).cast(vertices, down)
+        hit = np.isfinite(fall)
+        lo, hi = vertices[:, 2].min(), vertices[:, 2].max()
+        if not hit.any():
+            raise BadInput(str(self.spec.path), f"{where}.position",
+                           f"nothing of {name!r} lies below the body dropped from z = {lo:.3g} (its lowest "
+                           "point): lower z or move x, y over it")
+        if np.any(normal[hit, 2] < 0.0):  # a ray from inside meets a face from behind
+            raise BadInput(str(self.spec.path), f"{where}.position",
+                           f"the body dropped from z = {lo:.3g} (its lowest point) starts inside {name!r}: raise z")
+        return float(0.5 * (lo + hi) - fall[hit].min())
+
     def _add(self, body: BodySpec, is_object: bool) -> None:
         kind = "objects" if is_object else "environment"
         index = (self.spec.objects if is_object else self.spec.environment).index(body)
@@ -200,7 +221,9 @@ class Simulation:
                            "no range sensor here resolves it")
         center = 0.5 * (lo + hi)
         position = body.position.copy()  # the centre of the body's bounding box
-        if body.on is not None:
+        if body.on is not None and body.drop:
+            position[2] = self._drop_onto(body.on, mesh.vertices - center + position, where) + CONTACT_GAP
+        elif body.on is not None:
             position[2] = self._support_top(body.on, position[:2], where) + CONTACT_GAP + (center[2] - lo[2])
         if is_file_body:
             p.resetBasePositionAndOrientation(

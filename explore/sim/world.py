@@ -49,6 +49,7 @@ class BodySpec:
     on: str | None = None  # name of the body it rests on
     known: bool = False
     color: tuple[float, float, float, float] = (0.7, 0.7, 0.7, 1.0)
+    drop: bool = False  # on a body with z given: falls from z onto the surface below, not onto the body's top
 
 
 @dataclass(frozen=True)
@@ -202,6 +203,7 @@ def _body(data: Any, file: str, prefix: str, world_dir: Path, is_object: bool) -
     position = f.vector("position", (2, 3))
     rpy = f.vector("rpy_deg", 3, [0.0, 0.0, 0.0])
     on = f.string("on_top_of", None) if f.has("on_top_of") else None
+    drop = on is not None and len(position) == 3
     if len(position) == 2:
         if on is None:
             raise BadInput(file, f.where("position"), "give x, y, z, or x, y together with on_top_of")
@@ -235,7 +237,7 @@ def _body(data: Any, file: str, prefix: str, world_dir: Path, is_object: bool) -
     known = f.boolean("known", False) if is_object else False
     color = tuple(f.vector("color", 4, [0.7, 0.7, 0.7, 1.0]))
     f.check_unknown()
-    return BodySpec(name, position, rpy, shape, dims, source, scale, size, on, known, color)
+    return BodySpec(name, position, rpy, shape, dims, source, scale, size, on, known, color, drop)
 
 
 def _plugin(data: Any, file: str, key: str) -> PluginSpec:
