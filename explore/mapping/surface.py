@@ -24,6 +24,7 @@ per-voxel features d̄_i, n̄_i, b_i (Eq. 4.24–4.28) feed the PVS.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -98,6 +99,8 @@ class SurfaceModel(SurfaceFeatures):
     min_component : connected mesh pieces with fewer triangles are dropped (noise specks).
     max_grid_nodes : the voxel size grows if the region would need more grid nodes
         (13 bytes per node; the bunny region needs 0.4 M at 3.5 mm).
+    exclude : ``exclude(points) -> mask`` of the points in the region that are no part of the
+        object (the known environment reaching into the region: a shelf's lip or post); None: none.
     """
 
     def __init__(
@@ -120,6 +123,7 @@ class SurfaceModel(SurfaceFeatures):
         grid_floor: float = 0.0,
         min_component: int = 30,
         max_grid_nodes: int = 8_000_000,
+        exclude: Callable[[Points3], np.ndarray] | None = None,
     ) -> None:
         self.region_min = np.asarray(region_min, dtype=float).copy()
         self.region_max = np.asarray(region_max, dtype=float).copy()
@@ -144,6 +148,7 @@ class SurfaceModel(SurfaceFeatures):
         self.floor_clearance = float(floor_clearance)
         self.grid_floor = float(grid_floor)
         self.min_component = int(min_component)
+        self.exclude = exclude
         # grid nodes at origin + i * voxel, one node of padding around the region
         self.grid_origin = self.region_min - voxel
         self.grid_shape = tuple(int(n) for n in np.ceil(extent / voxel).astype(int) + 3)
@@ -195,6 +200,8 @@ class SurfaceModel(SurfaceFeatures):
             sig = np.nan_to_num(np.broadcast_to(np.asarray(sigmas, dtype=float), len(points)))
             clearance = np.maximum(self.floor_clearance, 3.0 * sig * dz)
         keep = finite & self.inside_region(points, clearance)
+        if self.exclude is not None and keep.any():
+            keep[keep] = ~self.exclude(points[keep])
         points, origins = points[keep], origins[keep]
         before = len(self._keys)
         if len(points):

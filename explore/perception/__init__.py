@@ -52,6 +52,7 @@ from explore.perception.segmentation import (
     Segmentation,
     Table,
     euclidean_clusters,
+    grown_to,
     merge_clusters,
     ransac_iterations,
 )
@@ -107,6 +108,7 @@ __all__ = [
     "default_path",
     "estimate_normals",
     "euclidean_clusters",
+    "grown_to",
     "depth_image",
     "DepthProcessing",
     "filter_depth_scan",

@@ -144,17 +144,22 @@ def same_plane(a: Table, b: Table, distance: float, max_angle_deg: float = 5.0) 
 
 def merge_tables(a: Table, b: Table | None) -> Table:
     """``a`` with its hull grown by ``b``'s (both hulls projected into ``a``'s table frame)."""
-    from scipy.spatial import ConvexHull, QhullError
-
     if b is None:
         return a
-    corners = b.hull @ b.world_T_table[:3, :2].T + b.world_T_table[:3, 3]  # b's hull in world coordinates
-    local = np.vstack([a.hull, a.to_table(corners)[:, :2]])
+    return grown_to(a, b.hull @ b.world_T_table[:3, :2].T + b.world_T_table[:3, 3], b.inliers)
+
+
+def grown_to(table: Table, points: Points3, inliers: int = 0) -> Table:
+    """``table`` with its hull grown to cover ``points`` (world, projected onto its plane); ``table``
+    itself if the hull cannot be built."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    local = np.vstack([table.hull, table.to_table(points)[:, :2]])
     try:
         hull = ConvexHull(local)
     except QhullError:
-        return a
-    return Table(a.plane, a.world_T_table, local[hull.vertices], a.inliers + b.inliers)
+        return table
+    return Table(table.plane, table.world_T_table, local[hull.vertices], table.inliers + inliers)
 
 
 @dataclass

@@ -15,6 +15,7 @@ from explore.perception import distance_to_model
 from explore.scene.motion import target_start
 from explore.scene.scene_objects import (
     AMBIGUOUS,
+    ENVIRONMENT_MARGIN,
     MODELLED,
     MODELLING,
     NO_PROGRESS,
@@ -60,9 +61,15 @@ class ObjectModelling:
         strategy = resolve_strategy(scene.settings.strategy, scene.registry)
         strategy = dataclasses.replace(strategy, termination_params={
             **strategy.termination_params, "coverage": settings.model_coverage, "n_abort": settings.model_scans + seen})
+        support_z = lo[2] + ENVIRONMENT_MARGIN  # the box rests on the support: its band is the floor clearance's
+
+        def environment(points: np.ndarray) -> np.ndarray:  # a shelf's lip or post reaching into the box
+            return scene.environment_points(points, support_z)
+
         session = ModellingSession(scene.sim, strategy, scene.registry, seed=scene.settings.seed + 7919 * (obj.id + 1),
                                    max_scans=scene.settings.model_scans + seen, region=(lo, hi), obstacles=others,
-                                   fallback_generator=None, standoff=0.0)  # as the scene's views
+                                   fallback_generator=None, standoff=0.0,  # as the scene's views
+                                   surface_params={"exclude": environment})
         scene.modelling_sessions[obj.id] = session
         obj.status, obj.modelling_end = MODELLING, ""
         obj.note(f"modelling in box {np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()}")

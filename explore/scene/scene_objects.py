@@ -35,6 +35,8 @@ TARGET, SCAN_BUDGET, NO_PROGRESS, NO_VIEW, VIEW_BUDGET, RECOGNISED_INSTEAD = (
 
 FLOOR = (0.0, 0.0, 1.0, 0.0)  # the plane robot bases drive on (world z = 0)
 UPRIGHT_NORMAL_Z = math.cos(math.radians(45.0))  # a face whose normal has |n_z| below this is upright
+ENVIRONMENT_MARGIN = 0.005  # m: points this near the known environment (or outside the region) are not an object's
+WALL_MARGIN = 0.02  # m: nor points this near its upright faces (the segmenter's plane distance threshold)
 
 
 @dataclass

@@ -44,13 +44,14 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, NO_CANDIDATES, Points3
-from explore.perception import Cloud, Cluster, Model, Segmentation, Table, require_role, vote_points
+from explore.perception import Cloud, Cluster, Model, Segmentation, Table, grown_to, require_role, vote_points
 from explore.scene.database_update import DatabaseUpdate
 from explore.scene.motion import Mover
 from explore.scene.object_modelling import ObjectModelling
 from explore.scene.recognition import Recognition
 from explore.scene.scene_objects import (
     AMBIGUOUS,
+    ENVIRONMENT_MARGIN,
     FLOOR,
     MODELLED,
     MODELLING,
@@ -60,6 +61,7 @@ from explore.scene.scene_objects import (
     UNKNOWN,
     UPRIGHT_NORMAL_Z,
     VIEW_BUDGET,
+    WALL_MARGIN,
     SceneObject,
     View,
     _plugin,
@@ -69,8 +71,6 @@ from explore.scene.settings import SceneSettings
 from explore.scene.viewing import ViewTaking
 
 REGION_SUPPORT_GAP = 0.05  # m: how far above its support a world's region may begin
-ENVIRONMENT_MARGIN = 0.005  # m: points this near the known environment (or outside the region) are not an object's
-WALL_MARGIN = 0.02  # m: nor points this near its upright faces (the segmenter's plane distance threshold)
 
 
 class SceneSession:
@@ -235,19 +235,25 @@ class SceneSession:
 
     def _off_environment(self, cluster: Cluster, lo: np.ndarray, hi: np.ndarray) -> Cluster | None:
         """The cluster without the points that are not an object's: outside the region (the world says
-        its objects lie within it), within ``ENVIRONMENT_MARGIN`` of the known environment, or within
-        ``WALL_MARGIN`` of its upright faces (a shelf's back and sides, seen at a slant through the depth
-        noise; a horizontal face is the support, whose band the segmenter has cut); None if none is left."""
+        its objects lie within it) or the known environment's (:meth:`environment_points`); None if none
+        is left."""
         points = cluster.points
         keep = np.all((points >= lo - ENVIRONMENT_MARGIN) & (points <= hi + ENVIRONMENT_MARGIN), axis=1)
         if keep.any():
-            nearest, normals = self.sim.environment_caster().closest(points[keep])
-            distance = np.linalg.norm(nearest - points[keep], axis=1)
-            upright = np.abs(normals[:, 2]) < UPRIGHT_NORMAL_Z
-            keep[keep] = (distance > ENVIRONMENT_MARGIN) & ~(upright & (distance <= WALL_MARGIN))
+            keep[keep] = ~self.environment_points(points[keep])
         if keep.all():
             return cluster
         return cluster.subset(keep) if keep.any() else None
+
+    def environment_points(self, points: np.ndarray, support_z: float = -np.inf) -> np.ndarray:
+        """Mask of the points that are the known environment's: within ``ENVIRONMENT_MARGIN`` of it
+        (where its nearest surface lies higher than ``support_z``: below, the support plane, whose band
+        the segmenter and the modelling's floor clearance deal with), or within ``WALL_MARGIN`` of its
+        upright faces (a shelf's back and sides, seen at a slant through the depth noise)."""
+        nearest, normals = self.sim.environment_caster().closest(points)
+        distance = np.linalg.norm(nearest - points, axis=1)
+        upright = np.abs(normals[:, 2]) < UPRIGHT_NORMAL_Z
+        return ((distance <= ENVIRONMENT_MARGIN) & (nearest[:, 2] > support_z)) | (upright & (distance <= WALL_MARGIN))
 
     @staticmethod
     def _supports_region(table: Table, lo: np.ndarray, hi: np.ndarray) -> bool:
@@ -262,14 +268,18 @@ class SceneSession:
         """Segment view ``index`` again on its points within the region's footprint, from
         ``REGION_SUPPORT_GAP`` below the region's floor to its top: the view's planes were another level
         (a shelf's lower board, the floor under a table the region sits on) or upright (a shelf's back
-        and sides), so the support is searched where the world says the objects are. Keeps ``first``
-        if that finds none either."""
+        and sides), so the support is searched where the world says the objects are, and it reaches
+        over the region's whole footprint (a bin's floor seen from its front, past its lip, shows
+        a strip; the objects on the rest would be cut off). Keeps ``first`` if that finds none either."""
         cloud = Cloud.from_scans(self.views[index].scan, [index])
         band_lo = np.array([lo[0], lo[1], lo[2] - REGION_SUPPORT_GAP])
         inside = np.all((cloud.points >= band_lo) & (cloud.points <= hi), axis=1)
-        again = self.segmenter.segment(cloud.subset(inside), table=self.table)
+        band = cloud.subset(inside)
+        again = self.segmenter.segment(band, table=self.table)
         if again.table is None:
             return first
+        footprint = np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
+        again = self.segmenter.segment(band, table=grown_to(again.table, footprint))
         again.diagnostics["support"] = "region band"
         return again
 

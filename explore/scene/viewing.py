@@ -137,7 +137,10 @@ class ViewTaking:
                 continue
             directions += 1
             for d, ring in zip(ladder, rings, strict=True):
-                reached = scene.mover.reach(as_target(scene.sim.sensor, ring[index], obj.cluster.points, d))
+                target = as_target(scene.sim.sensor, ring[index], obj.cluster.points, d)
+                if self.already_taken(target):  # it would show the same surface again
+                    continue
+                reached = scene.mover.reach(target)
                 if reached is not None:
                     view = self.add_view(reached[0], purpose, obj.id, reached[1])
                     if view is not None or scene.budget_left <= 0:
@@ -148,9 +151,10 @@ class ViewTaking:
         return None
 
     def in_sight(self, eye: np.ndarray, points: np.ndarray, samples: int = 64, tolerance: float = 0.01) -> bool:
-        """Whether the known environment leaves at least half of ``points`` (up to ``samples`` of them,
-        evenly picked) in sight from ``eye``: a view from behind a shelf's back wall, from below its board
-        or from inside a cabinet sees the furniture, not the object."""
+        """Whether at least half of ``points`` (up to ``samples`` of them, evenly picked) lie within the
+        sensor's range of ``eye`` and the known environment leaves them in sight: a view from behind a
+        shelf's back wall, from below its board or from inside a cabinet sees the furniture, not the
+        object; one from 4 m away, with a camera that measures to 2 m, sees nothing."""
         if len(points) == 0:
             return True
         chosen = points[np.linspace(0, len(points) - 1, min(samples, len(points))).astype(int)]
@@ -158,7 +162,8 @@ class ViewTaking:
         lengths = np.linalg.norm(offsets, axis=1)
         hit, _, _ = self.scene.sim.environment_caster().cast(np.repeat(eye[None], len(chosen), 0),
                                                             offsets / lengths[:, None])
-        return bool(np.mean(hit >= lengths - tolerance) >= 0.5)
+        seen = (hit >= lengths - tolerance) & (lengths <= self.scene.sim.sensor.max_range)
+        return bool(np.mean(seen) >= 0.5)
 
     def look_closer(self, views: int = 2) -> tuple[int, int]:
         """Views aimed at the objects seen with fewer than ``min_points`` points, up to ``views`` per
