@@ -932,3 +932,31 @@ def test_in_a_shelf_bin_the_support_reaches_over_the_region_and_every_object_is_
         eye = mug.cluster.centroid + np.array([0.0, -1.0, 0.3])
         assert scene.viewing.in_sight(eye, mug.cluster.points)
         assert not scene.viewing.in_sight(mug.cluster.centroid + 2.5 * (eye - mug.cluster.centroid), mug.cluster.points)
+
+
+def test_occupied_space_no_object_explains_is_no_success(open_world, registry, tmp_path, monkeypatch):
+    """A segmentation that misses objects (the Kiva bin's support cut to the strip seen past the lip,
+    as before the support reached over the region) leaves their surfaces in the PVS with no object to
+    explain them: the session names them and the run is a failure, not a success. With every object
+    found nothing is left over: the support, the pod and the noise explain the rest."""
+    import explore.scene.session as session_module
+
+    for strip in (True, False):
+        if strip:
+            monkeypatch.setattr(session_module, "grown_to", lambda table, points, inliers=0: table)
+        else:
+            monkeypatch.undo()
+        with open_world("kiva_pod") as sim, ObjectDatabase.open(tmp_path / f"{strip}.db") as db:
+            db.seed_from_world(sim)
+            scene = SceneSession(sim, registry, db, seed=0)
+            scene.viewing.overview()
+            scene.segment()
+            missed = scene.unexplained_surface()
+            if not strip:
+                assert missed == [] and scene.shortfall()[0] != "failure", missed
+                continue
+            truth = {b.name: np.mean(b.mesh.bounds, axis=0) for b in sim.objects()}
+            near = {min(truth, key=lambda n: np.linalg.norm(truth[n][:2] - np.array(m["centre"][:2]))) for m in missed}
+            assert near == {"duck", "mug"} and missed[1]["voxels"] >= 100, missed  # the mug may come in two parts
+            outcome, reason = scene.shortfall()
+            assert outcome == "failure" and "no object explains" in reason, reason

@@ -209,6 +209,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
         # objects seen with too few points to be objects, and the body they lie on
         "too_small": [{**row, "body": _body_of(_true_points(session, session.object(row["id"]).cluster), sim)[0]}
                       for row in summary["too_small"]],
+        "unexplained_surface": summary["unexplained_surface"],  # occupied space no object explains
     }
     if session.registered:
         out["pose_graph"] = pose_graph_errors(session)

@@ -43,8 +43,18 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import BUDGET, NO_CANDIDATES, Points3
-from explore.perception import Cloud, Cluster, Model, Segmentation, Table, grown_to, require_role, vote_points
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Points3
+from explore.perception import (
+    Cloud,
+    Cluster,
+    Model,
+    Segmentation,
+    Table,
+    euclidean_clusters,
+    grown_to,
+    require_role,
+    vote_points,
+)
 from explore.scene.database_update import DatabaseUpdate
 from explore.scene.motion import Mover
 from explore.scene.object_modelling import ObjectModelling
@@ -71,6 +81,8 @@ from explore.scene.settings import SceneSettings
 from explore.scene.viewing import ViewTaking
 
 REGION_SUPPORT_GAP = 0.05  # m: how far above its support a world's region may begin
+UNEXPLAINED_AREA = 5e-4  # m²: occupied voxels no object explains, this much together, are an object missed
+EXPLAINED_NEAR = 0.015  # m: an occupied voxel this near an object's points is that object's
 
 
 class SceneSession:
@@ -120,6 +132,7 @@ class SceneSession:
         self.known_at_start = list(database.names())
         self.registered = self.mover.localises  # views recorded in a map frame of their own (not the truth)
         self.started = time.perf_counter()
+        self._unexplained: tuple[tuple[int, int, int], list[dict[str, Any]]] | None = None
         self.timings: dict[str, float] = {}
         self.database_update = DatabaseUpdate(self)
         self.object_modelling = ObjectModelling(self)
@@ -184,6 +197,11 @@ class SceneSession:
         def listed(objects: list[SceneObject]) -> str:
             return ", ".join(f"{o.id} (ĉ_m {o.coverage_estimate:.2f}, {o.modelling_scans} scans)" for o in objects)
 
+        missed = self.unexplained_surface()
+        if missed:
+            places = ", ".join(f"{m['voxels']} voxels around {m['centre']}" for m in missed[:3])
+            return FAILURE, (f"occupied space in the region that no object explains ({places}): an object the "
+                             "segmentation missed")
         modelled = self.by_status(MODELLED)
         below = [o for o in modelled if not o.coverage_estimate >= target]
         unreached = [o for o in below if o.modelling_end == NO_VIEW]
@@ -212,6 +230,41 @@ class SceneSession:
             return BUDGET, (f"view budget of {self.settings.max_views} used up with object(s) "
                             f"{', '.join(unexplained)} unexplained")
         return "", ""
+
+    def unexplained_surface(self) -> list[dict[str, Any]]:
+        """Clusters of occupied PVS voxels (p ≥ 0.75) in the region, at least ``UNEXPLAINED_AREA`` of
+        them together, that no object's points (within ``EXPLAINED_NEAR``), the known environment, the
+        support (1 cm above its plane) or the floor explains: a surface the views saw that the
+        segmentation never made an object of (a bin floor seen as a strip left the objects on the rest
+        of it out, and the run said `success`). Largest first: voxels and centre (m)."""
+        from scipy.spatial import cKDTree
+
+        key = (len(self.views), len(self.objects), sum(len(o.cluster.points) for o in self.objects))
+        if self._unexplained is not None and self._unexplained[0] == key:
+            return self._unexplained[1]
+        lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
+        voxel = float(self.pvs.resolution)
+        points = self.pvs.occupied_points(0.75)
+        points = points[np.all((points >= lo) & (points <= hi), axis=1) & (points[:, 2] > 0.01)]
+        if self.table is not None and len(points):
+            points = points[self.table.heights(points) > 0.01]
+        if len(points):
+            nearest, _ = self.sim.environment_caster().closest(points)
+            points = points[np.linalg.norm(nearest - points, axis=1) > ENVIRONMENT_MARGIN + 0.5 * np.sqrt(3) * voxel]
+        objects = [o.cluster.points for o in self.objects if len(o.cluster.points)]
+        if len(points) and objects:
+            distance, _ = cKDTree(np.vstack(objects)).query(points, distance_upper_bound=EXPLAINED_NEAR)
+            points = points[~np.isfinite(distance)]
+        found = []
+        if len(points):
+            labels = euclidean_clusters(points, 1.5 * voxel)
+            for label in np.unique(labels[labels >= 0]):
+                part = points[labels == label]
+                if len(part) * voxel * voxel >= UNEXPLAINED_AREA:
+                    found.append({"voxels": int(len(part)), "centre": np.round(part.mean(axis=0), 3).tolist()})
+        found.sort(key=lambda m: -m["voxels"])
+        self._unexplained = (key, found)
+        return found
 
     # -- segmentation and association ------------------------------------------------------------
     def segment(self) -> list[SceneObject]:
@@ -391,6 +444,7 @@ class SceneSession:
             "too_small": [{"id": o.id, "points": int(len(o.cluster.points)), "views": len(o.cluster.view_ids),
                            "closer_looks": o.closer_looks}
                           for o in self.too_small()],
+            "unexplained_surface": self.unexplained_surface(),
         }
 
     def metrics(self) -> dict[str, Any]:
