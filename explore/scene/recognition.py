@@ -175,8 +175,13 @@ class Recognition:
         in four runs of the 40-object room all 8 objects two agreeing views recognised were
         another object's model; the right ones had 3 to 5. The merged views cannot stand in:
         on a noisy base without a laser they fit the right model at the fused pose with q_h 0.11.
+        Views recorded where the sensor was (a free flyer, an arm: no pose graph moved them) are not
+        misregistered, so their merged q_h stands: there, three views of a shape sorter's front each
+        fitting part of the duck would take the sorter for the duck (a Kiva pod's bin).
         """
         scene = self.scene
+        if not scene.registered:
+            return False
         needed = scene.settings.multi_view_agree + 1
         best: tuple[str, FusedPose, list[Hypothesis]] | None = None
         for name in sorted({h.model for h in obj.hypotheses}):
