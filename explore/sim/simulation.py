@@ -169,26 +169,29 @@ class Simulation:
                 raise BadInput(file, "robot.base", f"the robot starts inside {', '.join(map(repr, inside))}")
 
     # -- bodies --------------------------------------------------------------------------
+    def _support(self, name: str) -> GroundTruthBody:
+        """The body ``name`` that another rests on (listed before it)."""
+        support = next((b for b in self.bodies if b.name == name), None)
+        if support is None:
+            raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
+        return support
+
     def _support_top(self, name: str, xy: Array, where: str) -> float:
         """The height of the top of the body ``name`` that a body centred at ``xy`` rests on."""
-        for body in self.bodies:
-            if body.name == name:
-                if not over_top(body.mesh, xy):
-                    lo, hi = body.mesh.bounds
-                    raise BadInput(str(self.spec.path), f"{where}.position",
-                                   f"[{xy[0]:g}, {xy[1]:g}] is not over the top of {name!r} (it spans x "
-                                   f"{lo[0]:.3g}..{hi[0]:.3g}, y {lo[1]:.3g}..{hi[1]:.3g}): the body would float")
-                return float(body.mesh.vertices[:, 2].max())
-        raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
+        support = self._support(name)
+        if not over_top(support.mesh, xy):
+            lo, hi = support.mesh.bounds
+            raise BadInput(str(self.spec.path), f"{where}.position",
+                           f"[{xy[0]:g}, {xy[1]:g}] is not over the top of {name!r} (it spans x "
+                           f"{lo[0]:.3g}..{hi[0]:.3g}, y {lo[1]:.3g}..{hi[1]:.3g}): the body would float")
+        return float(support.mesh.vertices[:, 2].max())
 
     def _drop_onto(self, name: str, vertices: Points3, where: str) -> float:
         """The height of the bounding-box centre at which a body whose vertices (world frame, at the
         position it is dropped from) come to rest on ``name``, falling straight down: the shortest
         fall of any vertex onto that body's surface. Picks one bin of a shelf with several, or a
         sloped floor, where the top of the whole body (:meth:`_support_top`) would be the roof."""
-        support = next((b for b in self.bodies if b.name == name), None)
-        if support is None:
-            raise BadInput(str(self.spec.path), "on", f"{name!r} must be listed before the bodies on it")
+        support = self._support(name)
         down = np.tile([0.0, 0.0, -1.0], (len(vertices), 1))
         fall, _, normal = RayCaster([support.mesh], nthreads=1).cast(vertices, down)
         hit = np.isfinite(fall)
