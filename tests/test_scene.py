@@ -868,6 +868,17 @@ def test_views_that_see_a_mug_turned_confirm_the_pose_of_all_views_together() ->
     assert recognition._confirming_the_merged_pose(obj) == []
 
 
+@contextmanager
+def _first_view(open_world, registry, world: str, db_path):  # noqa: ANN001, ANN202
+    """A scene session on ``world`` (its known objects in a fresh database) after its overview, segmented."""
+    with open_world(world) as sim, ObjectDatabase.open(db_path) as db:
+        db.seed_from_world(sim)
+        scene = SceneSession(sim, registry, db, seed=0)
+        scene.viewing.overview()
+        scene.segment()
+        yield sim, scene
+
+
 def test_on_a_shelf_the_support_is_the_board_the_region_sits_on_and_the_shelf_is_no_object(
         open_world, registry, tmp_path):
     """The shelf's lower board (or no level plane at all, with the back and sides in view) is what the
@@ -875,11 +886,8 @@ def test_on_a_shelf_the_support_is_the_board_the_region_sits_on_and_the_shelf_is
     0.80 m); every cluster is one of the three objects, not the back or sides seen through the noise;
     a view from behind the back wall or from below the board, for recognition or modelling, is not taken
     (it sees the shelf)."""
-    with open_world("shelf") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
-        db.seed_from_world(sim)
-        scene = SceneSession(sim, registry, db, seed=0)
-        scene.viewing.overview()
-        objects = scene.segment()
+    with _first_view(open_world, registry, "shelf", tmp_path / "o.db") as (sim, scene):
+        objects = scene.candidates()
         assert scene.table is not None and scene.table.height == pytest.approx(0.80, abs=0.01)
         truth = {b.name: np.mean(b.mesh.bounds, axis=0) for b in sim.objects()}
         for obj in list(objects):
@@ -904,11 +912,8 @@ def test_in_a_shelf_bin_the_support_reaches_over_the_region_and_every_object_is_
     plane the region band finds is a strip of it (the hull was 7.5 cm deep, and the duck and mug on the
     rest of the floor were cut off: the run ended `success` with 1 of 3 objects). Grown to the region's
     footprint, the support keeps every object in the bin, and the lip and walls (known) are none."""
-    with open_world("kiva_pod") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
-        db.seed_from_world(sim)
-        scene = SceneSession(sim, registry, db, seed=0)
-        scene.viewing.overview()
-        objects = scene.segment()
+    with _first_view(open_world, registry, "kiva_pod", tmp_path / "o.db") as (sim, scene):
+        objects = scene.candidates()
         assert scene.table is not None and scene.table.height == pytest.approx(0.81, abs=0.01)
         lo, hi = sim.spec.region_min, sim.spec.region_max
         corners = np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
@@ -946,11 +951,7 @@ def test_occupied_space_no_object_explains_is_no_success(open_world, registry, t
             monkeypatch.setattr(session_module, "grown_to", lambda table, points, inliers=0: table)
         else:
             monkeypatch.undo()
-        with open_world("kiva_pod") as sim, ObjectDatabase.open(tmp_path / f"{strip}.db") as db:
-            db.seed_from_world(sim)
-            scene = SceneSession(sim, registry, db, seed=0)
-            scene.viewing.overview()
-            scene.segment()
+        with _first_view(open_world, registry, "kiva_pod", tmp_path / f"{strip}.db") as (sim, scene):
             missed = scene.unexplained_surface()
             if not strip:
                 assert missed == [] and scene.shortfall()[0] != "failure", missed

@@ -332,7 +332,8 @@ class SceneSession:
         if again.table is None:
             return first
         footprint = np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
-        again = self.segmenter.segment(band, table=grown_to(again.table, footprint))
+        if not again.table.inside(footprint, margin=1e-6).all():  # once grown, later views keep it
+            again = self.segmenter.segment(band, table=grown_to(again.table, footprint))
         again.diagnostics["support"] = "region band"
         return again
 
