@@ -34,6 +34,7 @@ from explore.perception.hypotheses import (
     distance_to_model,
     rivals,
     surface_distances,
+    surfaces_coincide,
 )
 from explore.perception.icp import IcpResult, icp_local, scan_points_and_normals
 from explore.perception.incremental_graph import IncrementalPoseGraph, LikelihoodField
@@ -137,6 +138,7 @@ __all__ = [
     "scan_points_and_normals",
     "sigmas6",
     "surface_distances",
+    "surfaces_coincide",
     "distance_to_model",
     "vfh_signature",
 ]

@@ -106,6 +106,16 @@ def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 
     return distance_to_model(mesh if onto is None else onto, pose_b, points @ pose_a[:3, :3].T + pose_a[:3, 3])
 
 
+def surfaces_coincide(mesh: TriMesh, pose_a: Pose, pose_b: Pose, within: float = 0.003) -> bool:
+    """Whether two poses of a model put its surface in the same place: 95 % of it within ``within`` m.
+
+    A symmetric object's turned poses coincide (a capsule turned half a turn about its axis), so
+    they are one explanation of what was seen. A hidden mug handle moves only 5 % of the surface,
+    so the 95th percentile (6 mm there) and not the mean (3 mm) decides.
+    """
+    return bool(np.percentile(surface_distances(mesh, pose_a, pose_b), 95) < within)
+
+
 def distance_to_model(mesh: TriMesh, pose: Pose, points: Points3) -> Array:
     """Distance (m, (n,)) of world ``points`` to a model's surface (``mesh``, object frame) placed at ``pose``."""
     import open3d as o3d
@@ -128,9 +138,8 @@ def rivals(
     model at a pose more than ``translation`` m or ``rotation_deg`` away (the fusion radius of
     :func:`explore.perception.fuse_poses`): e.g. a mug whose handle is hidden, which fits the
     cylinder at any rotation about its axis. With ``meshes`` a second pose that puts the
-    model's surface where the first does (95 % of it within ``same_surface``: a symmetric
-    object) is the same explanation, not a rival; a hidden mug handle moves only 5 % of the
-    surface, so the 95th percentile (6 mm there) and not the mean (3 mm) decides.
+    model's surface where the first does (:func:`surfaces_coincide` within ``same_surface``: a
+    symmetric object) is the same explanation, not a rival.
     """
     ordered = sorted(hypotheses, key=lambda h: -h.q_h)
     if not ordered:
@@ -147,8 +156,8 @@ def rivals(
         r_err = math.degrees(r_err)
         if t_err <= translation and r_err <= rotation_deg:
             continue
-        if meshes is not None and h.model in meshes and np.percentile(
-                surface_distances(meshes[h.model], h.pose, best.pose), 95) < same_surface:
+        if meshes is not None and h.model in meshes and surfaces_coincide(
+                meshes[h.model], h.pose, best.pose, same_surface):
             continue
         out.append(h)
     return out
