@@ -6,8 +6,10 @@ objects that a shipped world, a benchmark or a test named when this benchmark wa
 list, so that a scene stays the same from commit to commit; a drawn object that one of those files
 names since is reported). The first two are known (in the database at the start),
 the other three unknown; each gets a size of 6-11 cm, a random yaw and one of five cells on the
-table. The free-flying Kinect-profile camera of ``tabletop`` explores it with ``SceneSession`` and a
-fresh database.
+table. The free-flying Kinect-profile camera of ``tabletop`` explores it with the ``scene_exploration``
+tree (as ``explore run``) and a fresh database. ``--like WORLD`` keeps a shipped world (its table,
+region, robot and sensor) and puts an unseen shape at the place of each of its objects, known where
+the world's object is known: the same tables under a mobile base or an arm.
 
 Per scene: status, objects explained, known objects recognised, within 5 mm / 2 degrees, on their
 surface within 5 mm (a symmetric object turned about its axis), objects taken for another object's
@@ -16,6 +18,7 @@ average, both ways), views and time.
 
     .venv/bin/python benchmarks/random_scenes.py --scenes 0-7            # a table, then totals
     .venv/bin/python benchmarks/random_scenes.py --scenes 3 --keep worlds_out/   # also write the worlds
+    .venv/bin/python benchmarks/random_scenes.py --scenes 0-3 --like scene_small_mobile   # a noisy mobile base
 """
 
 from __future__ import annotations
@@ -50,16 +53,24 @@ def named_elsewhere() -> set[str]:
     return names
 
 
-def scene_world(index: int) -> dict[str, Any]:
-    """The world of scene ``index``: a table with five unseen ``random_urdfs`` objects, two of them known."""
+def scene_world(index: int, like: str | None = None) -> dict[str, Any]:
+    """The world of scene ``index``: a table with five unseen ``random_urdfs`` objects, two of them known;
+    with ``like``, that shipped world with each of its objects replaced by an unseen shape at its place
+    (known where the world's object is known), its table, region, robot and sensor kept."""
     rng = np.random.default_rng(1000 + index)
     pool = [f"{i:03d}" for i in range(1000) if f"{i:03d}" not in NAMED]
+    template = yaml.safe_load((ROOT / "worlds" / f"{like}.yaml").read_text()) if like else None
+    places = ([(o["position"][:2], o["on_top_of"], bool(o.get("known"))) for o in template["objects"]] if template
+              else [(list(cell), "table", k < KNOWN) for k, cell in enumerate(CELLS)])
     objects = []
-    for k, (number, (x, y)) in enumerate(zip(rng.choice(pool, len(CELLS), replace=False), CELLS, strict=True)):
+    for number, (position, support, known) in zip(rng.choice(pool, len(places), replace=False), places, strict=True):
         size, yaw = float(rng.uniform(0.06, 0.11)), float(rng.uniform(0.0, 360.0))
         objects.append({"name": f"r{number}", "source": f"random_urdfs/{number}/{number}.urdf", "size": round(size, 3),
-                        "rpy_deg": [0, 0, round(yaw)], "position": [x, y], "on_top_of": "table",
-                        **({"known": True} if k < KNOWN else {})})
+                        "rpy_deg": [0, 0, round(yaw)], "position": position, "on_top_of": support,
+                        **({"known": True} if known else {})})
+    if template:
+        return {**template, "name": f"random_{like}_{index}", "objects": objects,
+                "description": f"{like} with unseen random_urdfs objects (benchmarks/random_scenes.py, scene {index})."}
     return {
         "name": f"random_scene_{index}",
         "description": f"Five unseen random_urdfs objects (benchmarks/random_scenes.py, scene {index}).",
@@ -74,23 +85,19 @@ def scene_world(index: int) -> dict[str, Any]:
 
 
 def run_scene(world_path: Path, seed: int, registry: Any) -> dict[str, Any]:
-    """Explore one scene in a fresh database; the row of the table."""
-    from explore.perception import ObjectDatabase
-    from explore.scene import SceneSession
-    from explore.sim import Simulation
+    """Run ``scene_exploration`` on one scene with a fresh database; the row of the table."""
+    from explore.runtime import RunConfig, execute
 
     started = time.perf_counter()
-    db_path = Path(tempfile.mkdtemp(prefix="explore-random-scene-")) / "objects.db"
-    with Simulation(str(world_path), registry) as sim, ObjectDatabase.open(db_path) as db:
-        db.seed_from_world(sim)
-        session = SceneSession(sim, registry, db, seed=seed, run_name=world_path.stem)
-        metrics = session.run()
-    status = "success" if metrics["all_explained"] and not metrics.get("unexplained_surface") else "failure"
+    folder = Path(tempfile.mkdtemp(prefix="explore-random-scene-"))
+    run = execute(RunConfig(tree="scene_exploration", world=str(world_path), seed=seed, out=folder / "run",
+                            settings={"start_scene.db": str(folder / "objects.db")}), registry)
+    metrics = run.metrics
     known = [o for o in metrics["objects"] if o["known"]]
     recognised = [o for o in known if o["result"] == "recognised" and o.get("correct_model")]
     wrong = [o for o in metrics["objects"] if o["result"] == "recognised" and not o.get("correct_model")]
     return {
-        "scene": world_path.stem, "status": status,
+        "scene": world_path.stem, "status": run.status,
         "explained": f"{metrics['objects_explained']}/{metrics['objects_total']}",
         "known_recognised": f"{len(recognised)}/{len(known)}",
         "known_within_5mm_2deg": sum(o["pose_error_mm"] <= 5.0 and o["pose_error_deg"] <= 2.0 for o in recognised),
@@ -116,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default="0-3", help="scene indices, e.g. 0-7 or 1,4")
     parser.add_argument("--seed", type=int, default=0, help="the runs' seed")
+    parser.add_argument("--like", help="a shipped world whose objects are replaced (its robot and table kept)")
     parser.add_argument("--keep", type=Path, help="write the worlds into this folder")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON")
     args = parser.parse_args(argv)
@@ -127,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     named = named_elsewhere()
     rows = []
     for index in _indices(args.scenes):
-        world = scene_world(index)
+        world = scene_world(index, args.like)
         if seen := [o["name"] for o in world["objects"] if o["name"][1:] in named]:
             print(f"scene {index}: {', '.join(seen)} named by the project since: no longer unseen", file=sys.stderr)
         path = folder / f"{world['name']}.yaml"
