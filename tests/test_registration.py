@@ -243,6 +243,25 @@ def test_rebase_scan_round_trip(tabletop):
     assert np.allclose(transform_points(invert(moved), rebase_scan(scan, moved).points()), local, atol=1e-9)
 
 
+def test_a_scan_rebased_after_every_correction_of_a_long_run_stays_rigid(tabletop):
+    """A mobile base's scan is re-based after every pose-graph correction of its run. Its pose
+    starts 1e-12 off a rotation (rounding); 200 corrections later it is still a rotation to 1e-9 and
+    its points are where the last correction puts them (with the transpose as inverse the deviation
+    doubled each time and the beams overflowed to NaN after some 50 corrections)."""
+    sim = tabletop
+    pose = look_at(np.array([0.0, -0.9, 1.35]), [0.0, 0.0, 0.65])
+    scan = sim.sensor.acquire(sim, pose, np.random.default_rng(3))
+    local = transform_points(invert(pose), scan.points())
+    scan.sensor_poses[0][:3, :3] *= 1.0 + 1e-12
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        corrected = _about(np.zeros(3), rng.normal(0.0, 0.01, 3), rng.normal(0.0, 0.01, 3)) @ pose
+        scan = rebase_scan(scan, corrected)
+    rotation = scan.sensor_poses[0][:3, :3]
+    assert np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-9)
+    assert np.allclose(transform_points(invert(corrected), scan.points()), local, atol=1e-6)
+
+
 def test_pose_graph_halves_the_error_of_a_noisy_mobile_base(open_world):
     """12 views around table_b of two_tables; odometry 1.5 cm / 1.5 deg per step accumulates."""
 

@@ -175,9 +175,12 @@ def rebase_scan(scan: Scan, corrected_pose: Pose) -> Scan:
     """The scan as if taken from ``corrected_pose`` instead of ``scan.sensor_poses[0]``.
 
     The same rigid correction ``corrected @ inv(sensor_poses[0])`` moves every beam and every
-    frame (a scan path keeps its shape), so the PVS and surface can be re-integrated.
+    frame (a scan path keeps its shape), so the PVS and surface can be re-integrated. The inverse is
+    the exact one, not the transpose: a scan is re-based after every correction of a run, and with the
+    transpose the rounding of its pose's rotation doubled each time (``S' = C Sᵀ S``) until, after some
+    50 corrections of a long mobile-base run, its beams overflowed to NaN.
     """
-    delta = as_pose(corrected_pose) @ invert(scan.sensor_poses[0])
+    delta = as_pose(corrected_pose) @ np.linalg.inv(scan.sensor_poses[0])
     r, t = delta[:3, :3], delta[:3, 3]
     return dataclasses.replace(
         scan,
