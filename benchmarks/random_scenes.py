@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from reproduce_kriegel import parse_seeds
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMED = frozenset("""017 025 026 028 077 079 096 099 116 127 132 145 156 172 177 226 277 278 292 321 337 344 352 358
@@ -111,14 +112,6 @@ def run_scene(world_path: Path, seed: int, registry: Any) -> dict[str, Any]:
     }
 
 
-def _indices(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        low, _, high = part.partition("-")
-        out += list(range(int(low), int(high or low) + 1))
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default="0-3", help="scene indices, e.g. 0-7 or 1,4")
@@ -127,6 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep", type=Path, help="write the worlds into this folder")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON")
     args = parser.parse_args(argv)
+    try:
+        indices = parse_seeds(args.scenes)
+    except ValueError:
+        parser.error(f"--scenes: {args.scenes!r} is not a list of indices or ranges such as 0-7 or 1,4")
+    if args.like and not (ROOT / "worlds" / f"{args.like}.yaml").is_file():
+        parser.error(f"--like: no shipped world {args.like!r} (see worlds/)")
     from explore.runtime import Registry
 
     registry = Registry.load()
@@ -134,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     named = named_elsewhere()
     rows = []
-    for index in _indices(args.scenes):
+    for index in indices:
         world = scene_world(index, args.like)
         if seen := [o["name"] for o in world["objects"] if o["name"][1:] in named]:
             print(f"scene {index}: {', '.join(seen)} named by the project since: no longer unseen", file=sys.stderr)

@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from explore.sim import TriMesh
 
 EXPLAINED_FLOOR = 0.005  # m: never closer than this to the model (a noisy view's own spread)
+FROM_VIEWS = "views"  # the method of a hypothesis made from a pose single views confirmed
 
 
 def _agree(pose: Pose, other: Pose) -> bool:
@@ -121,7 +122,7 @@ class Recognition:
         obj.rejected = []
         survivors = self._screened(obj, obj.hypotheses)
         if not survivors and (from_views := self._view_poses_on_merged(obj)):
-            obj.hypotheses = [*(h for h in obj.hypotheses if h.method != "views"), *from_views]
+            obj.hypotheses = [*(h for h in obj.hypotheses if h.method != FROM_VIEWS), *from_views]
             survivors = self._screened(obj, from_views)
         scene.timed("validate_s", start)
         min_q_h = self.min_q_h
@@ -185,7 +186,7 @@ class Recognition:
         all of them. Each recognition view is first recognised alone for the model whose merged
         hypothesis scored best (once per view)."""
         cluster = self.recognition_cluster(obj)
-        if proposed := [h for h in obj.hypotheses if h.method != "views"]:
+        if proposed := [h for h in obj.hypotheses if h.method != FROM_VIEWS]:
             best = max(proposed, key=lambda h: h.q_h if math.isfinite(h.q_h) else -1.0)
             for view in cluster.view_ids:  # each view alone, for the model the merged views liked best
                 self._check_view(obj, view, [best.model])
@@ -201,7 +202,7 @@ class Recognition:
             if any(t.model == h.model and _agree(t.pose, pose) for t in out):
                 continue
             check = render_and_compare(self._mesh(h.model), pose, cluster, scans, threshold)
-            out.append(Hypothesis(h.model, pose, check.quality, "views", check.as_dict()))
+            out.append(Hypothesis(h.model, pose, check.quality, FROM_VIEWS, check.as_dict()))
         return out
 
     def _recognise_from_views(self, obj: SceneObject) -> bool:
