@@ -493,7 +493,7 @@ class SurroundTable(ExploreBehaviour):
             return failure("the world has no table to surround")
         focus = tables[table] if isinstance(table, str) and table in tables else list(tables.values())[0]
         name = next(k for k, v in tables.items() if v is focus)
-        views = surround(scene, focus, self.p["d_min"], self.p["d_max"], math.radians(self.p["step_deg"]))
+        views = surround(scene, focus, self.p["d_min"], self.p["d_max"], math.radians(self.p["step_deg"]), repr(name))
         entry: dict[str, Any] = {"table": name, "views": len(views)}
         if not views and scene.budget_left > 0:
             entry["unreachable"] = True

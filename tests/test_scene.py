@@ -804,6 +804,25 @@ def test_a_view_budget_that_cuts_modelling_short_ends_the_run_budget_exhausted(r
         (run.status, run.reason)
 
 
+
+@pytest.mark.parametrize("tree, world, sensor, views, reason", [
+    ("scene_exploration", "scene_small", "laser_striper", 1,
+     "view budget of 1 used up: the overview took 1 of its 3 views"),
+    ("table_patrol", "scene_small_mobile", None, 2,
+     "view budget of 2 used up: 2 of the 12 observation poses around 'table' tried"),
+], ids=["striper_overview", "patrol_surround"])
+def test_a_view_budget_that_cuts_the_look_at_the_scene_short_ends_the_run_budget_exhausted(
+        registry, tmp_path, tree, world, sensor, views, reason):
+    """A striper's overview is several scan rows and a patrol's surround twelve poses: a budget that
+    ends either early leaves part of the scene unseen, so the run cannot claim success for explaining
+    what it happened to see (it did, with one striper row over scene_small's three objects)."""
+    from explore.runtime import RunConfig, execute
+
+    run = execute(RunConfig(tree=tree, world=world, sensor=sensor, seed=0, out=tmp_path / "run", max_scans=views,
+                            settings={"start_scene.db": str(tmp_path / "objects.db")}), registry)
+    assert run.metrics["views"] == views
+    assert run.status == "budget_exhausted" and run.reason == reason, (run.status, run.reason)
+
 NEAR_SYMMETRIC = """
 name: near_symmetric
 description: the shape sorter (its faces differ only in their holes) and a 4 cm cube (8 vertices) known

@@ -36,9 +36,11 @@ def known_tables(sim: Any, min_height: float = 0.3, max_height: float = 1.2, min
     return out
 
 
-def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, step: float = 0.5) -> list[Any]:
+def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, step: float = 0.5,
+             name: str = "the table") -> list[Any]:
     """One exploration step of Görner's surround-point view planning; the views taken (the pose
-    graph's corrections of earlier views are re-integrated once, after the last)."""
+    graph's corrections of earlier views are re-integrated once, after the last). Observation poses
+    the view budget leaves untried are noted in ``scene.budget_cuts``."""
     robot = scene.sim.robot
     here = scene.mover.believed_pose()
     height = robot.camera_height
@@ -46,7 +48,11 @@ def surround(scene: Any, focus: Array, d_min: float = 0.7, d_max: float = 1.5, s
         height = float(focus[2]) + 0.6
     start = 0.0 if here is None else math.atan2(here[1, 3] - focus[1], here[0, 3] - focus[0])
     taken = []
-    for ring in surround_poses(focus, float(height), d_min, d_max, step, start):
+    rings = surround_poses(focus, float(height), d_min, d_max, step, start)
+    for index, ring in enumerate(rings):
+        if scene.budget_left <= 0:
+            scene.budget_cuts.append(f"{index} of the {len(rings)} observation poses around {name} tried")
+            break
         for pose in ring:
             target = as_target(scene.sim.sensor, pose, None, float(np.linalg.norm(pose[:3, 3] - focus)))
             reached = scene.mover.reach(target)

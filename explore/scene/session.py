@@ -129,6 +129,7 @@ class SceneSession:
         self.model_vote_points: dict[str, Points3] = {}  # what each model votes with (Eq. 3.11)
         self.modelling_sessions: dict[int, Any] = {}
         self.added: list[str] = []
+        self.budget_cuts: list[str] = []  # looks of the scene a step planned and the view budget cut short
         self.known_at_start = list(database.names())
         self.registered = self.mover.localises  # views recorded in a map frame of their own (not the truth)
         self.started = time.perf_counter()
@@ -225,6 +226,8 @@ class SceneSession:
         cut = [o for o in below if o.modelling_end == VIEW_BUDGET]
         if cut:
             return BUDGET, f"view budget of {self.settings.max_views} used up modelling object(s) {listed(cut)}"
+        if self.budget_cuts:
+            return BUDGET, f"view budget of {self.settings.max_views} used up: {'; '.join(self.budget_cuts)}"
         unexplained = [str(o.id) for o in self.candidates() if not o.explained]
         if unexplained and self.budget_left <= 0:
             return BUDGET, (f"view budget of {self.settings.max_views} used up with object(s) "

@@ -104,7 +104,11 @@ class ViewTaking:
         """The first views of the scene (world ``overview`` or views of the region); PVS initialised."""
         scene = self.scene
         taken = []
-        for target in overview_targets(scene.sim.spec, scene.sim.sensor, scene.sim.robot):
+        targets = overview_targets(scene.sim.spec, scene.sim.sensor, scene.sim.robot)
+        for index, target in enumerate(targets):
+            if scene.budget_left <= 0:
+                scene.budget_cuts.append(f"the overview took {index} of its {len(targets)} views")
+                break
             view = self.add_view(target, "overview")
             if view is not None:
                 taken.append(view)
