@@ -315,6 +315,23 @@ def test_empty_cluster_and_no_models(scene):
         assert recognizer.recognize(clusters["duck"], [], scan) == []
 
 
+def test_a_model_flat_on_its_base_has_no_vfh_views_and_matches_nothing(registry, scene):
+    """A 10 cm plate 1 mm thick lies below the training views' 1 cm cut above the base: VFH stores no
+    signature for it (``explore db add`` of such a mesh ended in a traceback) and recognises nothing
+    with it alone, and beside the duck's model still finds the duck."""
+    from explore.perception import Model, model_descriptors
+    from explore.sim import box_mesh
+
+    scan, clusters, models, truth = scene
+    plate = Model("plate", box_mesh(np.array([0.1, 0.1, 0.001])))
+    stored = model_descriptors(plate)
+    assert stored["vfh"][0].shape == (0, 308 + 16 + 3) and len(stored["ppf"][0])
+    recognizer = registry.create("recognizer", "vfh_mean_distance")
+    assert recognizer.recognize(clusters["duck"], [plate], scan) == []
+    duck = next(m for m in models if m.name == "duck")
+    assert recognizer.recognize(clusters["duck"], [plate, duck], scan)[0].model == "duck"
+
+
 def test_symmetric_poses_are_not_rivals():
     """A cube turned by 90 deg puts its surface where it was: the same explanation, not an ambiguity."""
     from scipy.spatial.transform import Rotation

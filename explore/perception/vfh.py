@@ -220,8 +220,10 @@ class VFHRecognizer(RecognizerBase):
                                  min_height=self.min_height, pixel_angle_deg=self.pixel_angle_deg, noise=self.noise)
             views = [v for v in views if len(v.points) >= 10]
             signatures = np.array([vfh_signature(v.points, v.normals, v.model_T_camera[:3, 3]) for v in views])
-        return VFHModel(signatures, np.array([v.model_T_camera for v in views]),
-                        np.array([v.points.mean(axis=0) for v in views]))
+        k = len(views)  # none for a model flat on its base: every point lies below min_height
+        return VFHModel(np.reshape(signatures, (k, sum(VFH_BINS))),
+                        np.reshape([v.model_T_camera for v in views], (k, 4, 4)),
+                        np.reshape([v.points.mean(axis=0) for v in views], (k, 3)))
 
     def _model_cloud(self, model: Model, data: VFHModel) -> ModelCloud:
         if data.cloud is None:
@@ -254,6 +256,8 @@ class VFHRecognizer(RecognizerBase):
         if not views or not models:
             return []
         data = [self.model_data(m) for m in models]
+        if not any(len(d.signatures) for d in data):
+            return []
         owners = np.concatenate([np.full(len(d.signatures), i) for i, d in enumerate(data)])
         tree = cKDTree(np.vstack([d.signatures for d in data]))
         _, nearest = tree.query(np.array([s for _, s, _ in views]), k=1)
