@@ -102,11 +102,15 @@ def read_obj(path: Path) -> TriMesh:
 
 
 def _checked(mesh: TriMesh, path: Path) -> TriMesh:
-    """A mesh whose vertices are finite and whose faces index existing vertices, else ValueError."""
+    """A mesh whose vertices are finite, whose faces index existing vertices and which has some area, else
+    ValueError."""
     if not np.all(np.isfinite(mesh.vertices)):
         raise ValueError(f"{path.name}: a vertex is not a finite number")
     if mesh.triangles.size and (mesh.triangles.min() < 0 or mesh.triangles.max() >= len(mesh.vertices)):
         raise ValueError(f"{path.name}: a face refers to a vertex that does not exist")
+    corners = mesh.vertices[mesh.triangles]
+    if not np.any(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])):
+        raise ValueError(f"{path.name}: every triangle has zero area (no surface a sensor could see)")
     return TriMesh(mesh.vertices, mesh.triangles.astype(np.int32))
 
 

@@ -70,6 +70,8 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "source_obj_garbage": ("cannot read mesh", [("source: bunny.obj", "source: ../meshes/garbage.obj")]),
     "source_obj_bad_face": ("a face refers to a vertex", [("source: bunny.obj", "source: ../meshes/bad_face.obj")]),
     "source_obj_nan_vertex": ("not a finite number", [("source: bunny.obj", "source: ../meshes/nan_vertex.obj")]),
+    "source_obj_zero_area": ("every triangle has zero area",
+                             [("source: bunny.obj", "source: ../meshes/zero_area.obj")]),
     "source_obj_empty": ("no triangles", [("source: bunny.obj", "source: ../meshes/empty.obj")]),
     "source_ply_garbage": ("cannot read mesh", [("source: bunny.obj", "source: ../meshes/garbage.ply")]),
     "source_stl_garbage": ("cannot read mesh", [("source: bunny.obj", "source: ../meshes/garbage.stl")]),
@@ -215,6 +217,7 @@ def write_cases() -> None:
     (meshes / "garbage.obj").write_text("v 0 0 zero\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     (meshes / "bad_face.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
     (meshes / "nan_vertex.obj").write_text("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (meshes / "zero_area.obj").write_text("v 0 0 0\nv 0.05 0 0\nv 0.1 0 0\nv 0.05 0 0\nf 1 2 3\nf 2 3 4\n")
     (meshes / "empty.obj").write_text("# nothing\n")
     (meshes / "garbage.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n")
     (meshes / "garbage.stl").write_bytes(b"solid x\nfacet normal 0 0\nendsolid\n")
