@@ -155,17 +155,20 @@ class SparsePVS(PVS):
             self._cache[key] = cached = (self.version, marked)
         return cached[1]
 
-    def _stored(self, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _stored(self, lo: np.ndarray | None = None, hi: np.ndarray | None = None,
+                at_least: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Absolute voxel keys (m, 3) and log-odds (m,) of every observed voxel (log-odds not 0), of the blocks
-        that meet the voxel box [lo, hi) if one is given."""
+        that meet the voxel box [lo, hi) if one is given, whose log-odds reach ``at_least`` if given (a
+        room's free space is hundreds of millions of voxels: filter before the keys are made)."""
         coords, rows, fill = S.blocks_of(self._store)
         if lo is not None and hi is not None:
             meet = np.all(((coords + 1) << S.SHIFT > lo) & (coords << S.SHIFT < hi), axis=1)
             coords, rows, fill = coords[meet], rows[meet], fill[meet]
         stored = rows >= 0
         values = self._store[3][rows[stored]]
-        block, local = np.nonzero(values)
-        uniform = np.flatnonzero(~stored & (fill != 0.0))
+        floor = -np.inf if at_least is None else np.float32(at_least)
+        block, local = np.nonzero((values != 0.0) & (values >= floor))
+        uniform = np.flatnonzero(~stored & (fill != 0.0) & (fill >= floor))
         value = np.concatenate([values[block, local], np.repeat(fill[uniform], S.BLOCK_VOXELS)])
         block = np.concatenate([np.flatnonzero(stored)[block], np.repeat(uniform, S.BLOCK_VOXELS)])
         local = np.concatenate([local, np.tile(np.arange(S.BLOCK_VOXELS), len(uniform))])
@@ -191,8 +194,7 @@ class SparsePVS(PVS):
         return dense
 
     def _occupied_box(self, p_min: float) -> tuple[Array, Array] | None:
-        keys, values = self._stored()
-        keys = keys[values >= np.float32(logit(p_min))]
+        keys, _ = self._stored(at_least=logit(p_min))
         if not len(keys):
             return None
         return keys.min(axis=0) * self.resolution, (keys.max(axis=0) + 1) * self.resolution
@@ -209,10 +211,14 @@ class SparsePVS(PVS):
 
     def counts(self, thresholds: str = "validation") -> dict[str, int]:
         """Voxel counts {unknown, free, occupied} in the box; never-observed space is unknown."""
-        _, values = self._stored()
+        _, rows, fill = S.blocks_of(self._store)
+        values = self._store[3][rows[rows >= 0]]
+        values = values[values != 0.0]
+        fill = fill[(rows < 0) & (fill != 0.0)]
         counts = np.bincount(self._classify(values, thresholds), minlength=3)
+        counts += S.BLOCK_VOXELS * np.bincount(self._classify(fill, thresholds), minlength=3)
         unobserved = self._classify(np.zeros(1, np.float32), thresholds)[0]  # "planning" calls it an obstacle
-        counts[unobserved] += math.prod(self.shape) - len(values)
+        counts[unobserved] += math.prod(self.shape) - len(values) - S.BLOCK_VOXELS * len(fill)
         return {"unknown": int(counts[1]), "free": int(counts[0]), "occupied": int(counts[2])}
 
     def count(self, state: int, thresholds: str = "validation") -> int:
@@ -249,8 +255,8 @@ class SparsePVS(PVS):
         return out
 
     def occupied_points(self, p_min: float = 0.75) -> Points3:
-        keys, values = self._stored()
-        return (keys[values >= np.float32(logit(p_min))] + 0.5) * self.resolution
+        keys, _ = self._stored(at_least=logit(p_min))
+        return (keys + 0.5) * self.resolution
 
     def voxel_mesh(self, p_min: float = 0.75) -> TriMesh:
         box = self._occupied_box(p_min)
