@@ -887,6 +887,38 @@ def test_views_that_see_a_mug_turned_confirm_the_pose_of_all_views_together() ->
     assert recognition._confirming_the_merged_pose(obj) == []
 
 
+def test_most_views_confirming_a_nearly_symmetric_model_each_turned_confirm_the_model() -> None:
+    """room40's random_077: each view confirms the model alone at another turn (90-180 degrees apart),
+    none at the merged views' pose. Three of four checked views confirm it: recognised. Three of ten,
+    two of two, a rival model or merged views below q_h: no."""
+    from types import SimpleNamespace
+
+    from explore.core import pose_from, rpy_deg_to_matrix
+    from explore.perception import Hypothesis
+    from explore.scene import SceneSettings
+    from explore.scene.recognition import Recognition
+    from explore.scene.scene_objects import SceneObject
+
+    def at(yaw: float) -> np.ndarray:
+        return pose_from(np.array([1.0, 2.0, 0.7]), rpy_deg_to_matrix([0.0, 0.0, yaw]))
+
+    recognition = Recognition(SimpleNamespace(settings=SceneSettings(), recognizer=None))
+    obj = SceneObject(40, cluster=None, model="random_077", pose=at(0.0), q_h=0.81)
+    obj.view_hypotheses = [(v, Hypothesis("random_077", at(yaw), 0.8, "ppf")) for v, yaw in ((30, 90.0), (32, 180.0),
+                                                                                          (34, 270.0))]
+    assert recognition._confirming_the_merged_pose(obj) == []
+    assert recognition._confirming_the_model_turned(obj, checked=4) == [30, 32, 34]
+    assert recognition._confirming_the_model_turned(obj, checked=10) == []
+    obj.view_hypotheses = obj.view_hypotheses[:2]
+    assert recognition._confirming_the_model_turned(obj, checked=2) == []
+    obj.view_hypotheses = [(v, Hypothesis("random_077", at(yaw), 0.8, "ppf")) for v, yaw in ((30, 90.0), (32, 180.0),
+                                                                                          (34, 270.0))]
+    obj.q_h = 0.3
+    assert recognition._confirming_the_model_turned(obj, checked=3) == []
+    obj.q_h, obj.rivals = 0.81, [Hypothesis("random_078", at(0.0), 0.7, "ppf")]
+    assert recognition._confirming_the_model_turned(obj, checked=3) == []
+
+
 def test_a_view_that_fits_a_symmetric_object_turned_joins_the_merged_pose() -> None:
     """Fusion (Kriegel Sec. 5.6.2) needs the views' poses in one frame. A view that fits a can turned
     70 degrees about its axis puts the surface where the merged pose does: ICP from the merged pose
