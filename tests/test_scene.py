@@ -890,7 +890,7 @@ def test_views_that_see_a_mug_turned_confirm_the_pose_of_all_views_together() ->
 def test_most_views_confirming_a_nearly_symmetric_model_each_turned_confirm_the_model() -> None:
     """room40's random_077: each view confirms the model alone at another turn (90-180 degrees apart),
     none at the merged views' pose. Three of four checked views confirm it: recognised. Three of ten,
-    two of two, a rival model or merged views below q_h: no."""
+    two of two, another model as a rival or merged views below q_h: no."""
     from types import SimpleNamespace
 
     from explore.core import pose_from, rpy_deg_to_matrix
@@ -915,7 +915,9 @@ def test_most_views_confirming_a_nearly_symmetric_model_each_turned_confirm_the_
                                                                                           (34, 270.0))]
     obj.q_h = 0.3
     assert recognition._confirming_the_model_turned(obj, checked=3) == []
-    obj.q_h, obj.rivals = 0.81, [Hypothesis("random_078", at(0.0), 0.7, "ppf")]
+    obj.q_h, obj.rivals = 0.81, [Hypothesis("random_077", at(180.0), 0.78, "ppf")]  # itself turned: still the model
+    assert recognition._confirming_the_model_turned(obj, checked=3) == [30, 32, 34]
+    obj.rivals = [Hypothesis("random_078", at(0.0), 0.7, "ppf")]
     assert recognition._confirming_the_model_turned(obj, checked=3) == []
 
 

@@ -510,7 +510,7 @@ class Recognition:
 
     def _confirming_the_model_turned(self, obj: SceneObject, checked: int) -> list[int]:
         """The views that confirm the object's model alone, each at its own turn, when they are at least
-        ``multi_view_agree`` + 1 and half of the ``checked`` views, the model has no rival and the merged
+        ``multi_view_agree`` + 1 and half of the ``checked`` views, no other model rivals it and the merged
         views confirm it too (q_h and the PVS votes); else none.
 
         A nearly symmetric shape (its surface turned 90-180 degrees lies 3-7 mm from itself) fits every
@@ -520,8 +520,8 @@ class Recognition:
         turn is right the views cannot tell; that it is this model they all say. One view in ten that
         confirms a similar model (a block beside a part, ``tabletop_similar``) stays unconfirmed.
         """
-        if obj.rivals or obj.pose is None or not reaches(obj.q_h, self.min_q_h):
-            return []
+        if any(r.model != obj.model for r in obj.rivals) or obj.pose is None or not reaches(obj.q_h, self.min_q_h):
+            return []  # rivals of the same model (its other turns) leave only the pose in doubt
         views = sorted({v for v, h in obj.view_hypotheses if h.model == obj.model})
         needed = max(self.scene.settings.multi_view_agree + 1, math.ceil(checked / 2))
         return views if len(views) >= needed else []
