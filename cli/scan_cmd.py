@@ -11,6 +11,8 @@ import typer
 
 from explore.core import BadInput, check_output
 
+DEFAULT_OUT = Path("runs/scan.ply")
+
 
 def _vector(text: str, option: str) -> np.ndarray:
     from explore.core import parse_vector
@@ -27,7 +29,8 @@ def register(app: typer.Typer) -> None:
         world: Annotated[str, typer.Option("--world", "-w", help="World name or file.")],
         look_from: Annotated[str, typer.Option("--look-from", help="Sensor position x,y,z [m].")],
         look_at: Annotated[str, typer.Option("--look-at", help="Point the sensor looks at x,y,z [m].")],
-        out: Annotated[Path, typer.Option("--out", "-o", help="Output point cloud (.ply).")] = Path("runs/scan.ply"),
+        out: Annotated[Path | None, typer.Option(
+            "--out", "-o", help=f"Output point cloud (.ply; default {DEFAULT_OUT}, overwritten).")] = None,
         sensor: Annotated[
             str | None, typer.Option("--sensor", "-s", help="Sensor plugin (default: the world's).")
         ] = None,
@@ -37,6 +40,7 @@ def register(app: typer.Typer) -> None:
         sweep: Annotated[float, typer.Option("--sweep", min=0.0, help="Scan path length for line sensors [m].")] = 0.3,
         png: Annotated[Path | None, typer.Option("--png", help="Also save a picture of the scan.")] = None,
         seed: Annotated[int, typer.Option("--seed", min=0, help="Noise seed.")] = 0,
+        replace: Annotated[bool, typer.Option("--replace", help="Overwrite an existing --out or --png file.")] = False,
     ) -> None:
         """Simulate one scan of a world and write the measured points."""
         from explore.core import parse_assignment, save_points_png
@@ -47,9 +51,12 @@ def register(app: typer.Typer) -> None:
         eye, target = _vector(look_from, "--look-from"), _vector(look_at, "--look-at")
         if np.linalg.norm(target - eye) < 1e-6:
             raise BadInput("--look-at", None, "must differ from --look-from")
-        check_output(out, "--out", suffixes=(".ply",))
-        if png is not None:
-            check_output(png, "--png", suffixes=(".png",))
+        for option, path, suffix in (("--out", out, ".ply"), ("--png", png, ".png")):
+            if path is not None:
+                check_output(path, option, suffixes=(suffix,))
+                if path.exists() and not replace:
+                    raise BadInput(option, str(path), "exists: use --replace to overwrite it")
+        out = out or DEFAULT_OUT
         reg = registry()
         with Simulation(world, None) as sim:
             params = dict(sim.spec.sensor.params) if sensor in (None, sim.spec.sensor.plugin) else {}

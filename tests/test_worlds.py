@@ -208,6 +208,12 @@ def test_cli_scan_writes_ply_and_png(tmp_path) -> None:
     assert "pybullet build time" not in result.stdout + result.stderr
     bad = _cli("scan", "--world", "bunny_pedestal", "--look-from", "0.3,nan,0.6", "--look-at", "0,0,0.56")
     assert bad.returncode == 2 and "--look-from" in bad.stderr and "Traceback" not in bad.stderr
+    again = ["scan", "--world", "bunny_pedestal", "--look-from", "0.2,0,0.6", "--look-at", "0,0,0.56",
+             "--out", str(out)]
+    before = out.read_bytes()
+    kept = _cli(*again)  # an existing file is the user's: only --replace overwrites it
+    assert kept.returncode == 2 and "exists: use --replace" in kept.stderr and out.read_bytes() == before
+    assert _cli(*again, "--replace").returncode == 0 and out.read_bytes() != before
 
 
 def test_worlds_list_and_show(tmp_path) -> None:
