@@ -477,13 +477,17 @@ class Recognition:
         if agreed or unconfirmed or at_merged or turned:
             obj.pose = self.refined(obj, obj.fused.pose)
             obj.status = RECOGNISED
-            obj.note("recognised by the fused per-view poses" if agreed else
-                     f"recognised from {len(obj.fused.members)} view(s): no second view confirmed it" if unconfirmed
-                     else f"recognised at the pose of its views together, which view(s) "
-                          f"{', '.join(str(v) for v, _ in at_merged)} confirm alone (the others saw it turned)"
-                     if at_merged else
-                     f"recognised at the pose of its views together: views {', '.join(str(v) for v in turned)} of "
-                     f"{checked} confirm the model alone, each at another turn (a nearly symmetric shape)")
+            if agreed:
+                how = "by the fused per-view poses"
+            elif unconfirmed:
+                how = f"from {len(obj.fused.members)} view(s): no second view confirmed it"
+            elif at_merged:
+                how = (f"at the pose of its views together, which view(s) {', '.join(str(v) for v, _ in at_merged)} "
+                       "confirm alone (the others saw it turned)")
+            else:
+                how = (f"at the pose of its views together: views {', '.join(str(v) for v in turned)} of {checked} "
+                       "confirm the model alone, each at another turn (a nearly symmetric shape)")
+            obj.note(f"recognised {how}")
             if obj.recognised_after_views is None:
                 obj.recognised_after_views = len(scene.views)
         else:
