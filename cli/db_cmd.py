@@ -129,13 +129,11 @@ def register(app: typer.Typer) -> None:
         replace: Annotated[bool, typer.Option("--replace", help="Overwrite the file if it exists.")] = False,
     ) -> None:
         """Write an object's mesh to a file (an existing file only with ``--replace``)."""
-        from explore.core import BadInput, check_output
+        from explore.core import check_output
 
         from .main import console
 
-        check_output(out, "--out", suffixes=(".ply", ".obj", ".stl"))
-        if out.exists() and not replace:
-            raise BadInput("--out", str(out), "exists: use --replace to overwrite it")
+        check_output(out, "--out", suffixes=(".ply", ".obj", ".stl"), replace=replace)
         with _open(db, readonly=True) as database:
             path = database.export(name, out)
             console.print(f"wrote {path}")

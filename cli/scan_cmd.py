@@ -53,9 +53,7 @@ def register(app: typer.Typer) -> None:
             raise BadInput("--look-at", None, "must differ from --look-from")
         for option, path, suffix in (("--out", out, ".ply"), ("--png", png, ".png")):
             if path is not None:
-                check_output(path, option, suffixes=(suffix,))
-                if path.exists() and not replace:
-                    raise BadInput(option, str(path), "exists: use --replace to overwrite it")
+                check_output(path, option, suffixes=(suffix,), replace=replace)
         out = out or DEFAULT_OUT
         reg = registry()
         with Simulation(world, None) as sim:

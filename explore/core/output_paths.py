@@ -10,8 +10,10 @@ from explore.core.errors import BadInput
 from explore.core.user_files import check_path_name
 
 
-def check_output(path: str | Path, option: str, folder: bool = False, suffixes: tuple[str, ...] = ()) -> Path:
-    """``path`` as a place to write a file (or, with ``folder``, a folder of results).
+def check_output(path: str | Path, option: str, folder: bool = False, suffixes: tuple[str, ...] = (),
+                 replace: bool = True) -> Path:
+    """``path`` as a place to write a file (or, with ``folder``, a folder of results); an existing file
+    only with ``replace`` (the command's ``--replace``).
 
     BadInput when it is empty or the current folder, a folder where a file is expected (or a
     file where a folder is), has a wrong suffix, a name longer than the file system allows, or
@@ -29,6 +31,8 @@ def check_output(path: str | Path, option: str, folder: bool = False, suffixes: 
         raise BadInput(option, text, "is a folder, expected a file path")
     if suffixes and path.suffix.lower() not in suffixes:
         raise BadInput(option, text, f"expected a {' or '.join(suffixes)} file")
+    if not replace and path.is_file():
+        raise BadInput(option, text, "exists: use --replace to overwrite it")
     existing = path.absolute()
     while not existing.exists():
         existing = existing.parent
