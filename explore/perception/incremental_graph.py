@@ -57,17 +57,36 @@ class LikelihoodField:
         return np.where(inside, values, 0.0).mean(axis=-1)
 
     def match(self, xyz: Array, pivot: Array, search: float = 0.15, search_yaw: float = math.radians(4.0),
-              points: int = 400) -> tuple[Pose, float]:
+              points: int = 400, recentre: int = 0) -> tuple[Pose, float]:
         """Best planar motion (x, y, yaw about the vertical through ``pivot``) of the points
         ``xyz`` onto the map, and its score.
 
         Coarse to fine: steps of an eighth of the window (at least 4 cm / 1 deg), then 1 cm /
-        0.25 deg around the best; at most ``points`` points (evenly picked) are scored.
+        0.25 deg around the best; at most ``points`` points (evenly picked) are scored. An
+        answer beyond the window (the fine step went past its border) is no peak: the true
+        motion may lie farther out, so up to ``recentre`` times the window is moved there and
+        searched again, and the best score of all the windows wins.
         """
         xyz = np.asarray(xyz, dtype=float)
         xyz = xyz[np.linspace(0, len(xyz) - 1, min(points, len(xyz))).astype(int)]
         pivot = np.asarray(pivot, dtype=float)[:2]
         best = (-1.0, 0.0, np.zeros(2))
+        for _ in range(1 + max(0, int(recentre))):
+            centre = best
+            found = self._search(xyz, pivot, centre[1], centre[2], search, search_yaw)
+            if found[0] > best[0]:
+                best = found
+            if not (abs(found[1] - centre[1]) > search_yaw or np.any(np.abs(found[2] - centre[2]) > search)):
+                break
+        score, yaw, shift = best
+        out = _turn_about(np.array([*pivot, 0.0]), np.array([0.0, 0.0, 1.0]), yaw)
+        out[:2, 3] += shift
+        return out, score
+
+    def _search(self, xyz: Array, pivot: Array, yaw: float, shift: Array, search: float,
+                search_yaw: float) -> tuple[float, float, Array]:
+        """(score, yaw, shift) of the best motion in one window centred on (``yaw``, ``shift``)."""
+        best = (-1.0, float(yaw), np.asarray(shift, dtype=float))
         coarse, coarse_yaw = max(0.04, search / 8.0), max(math.radians(1.0), search_yaw / 8.0)
         for half, step, half_yaw, step_yaw in ((search, coarse, search_yaw, coarse_yaw),
                                                (coarse, 0.01, coarse_yaw, math.radians(0.25))):
@@ -76,18 +95,15 @@ class LikelihoodField:
             grid = np.zeros((len(shifts), 1, 3))
             grid[:, 0, :2] = shifts
             centre_yaw = best[1]
-            for yaw in centre_yaw + np.arange(-half_yaw, half_yaw + 1e-9, step_yaw):
-                c, s = math.cos(yaw), math.sin(yaw)
+            for turn in centre_yaw + np.arange(-half_yaw, half_yaw + 1e-9, step_yaw):
+                c, s = math.cos(turn), math.sin(turn)
                 turned = xyz.copy()
                 turned[:, :2] = (xyz[:, :2] - pivot) @ np.array([[c, s], [-s, c]]) + pivot
                 scores = self.score(turned[None] + grid)
                 k = int(np.argmax(scores))
                 if scores[k] > best[0]:
-                    best = (float(scores[k]), float(yaw), shifts[k].copy())
-        score, yaw, shift = best
-        out = _turn_about(np.array([*pivot, 0.0]), np.array([0.0, 0.0, 1.0]), yaw)
-        out[:2, 3] += shift
-        return out, score
+                    best = (float(scores[k]), float(turn), shifts[k].copy())
+        return best
 
 
 def _turn_about(point: Array, axis: Array, angle: float) -> Pose:
