@@ -30,6 +30,19 @@ def test_tabletop_has_six_objects_two_known() -> None:
     assert sorted(o.name for o in spec.objects if o.known) == ["duck", "mug"]
 
 
+def test_numbers_with_an_exponent_and_no_dot_are_numbers(tmp_path) -> None:
+    """YAML 1.1 reads ``15e-2`` as a string (it asks for ``15.0e-2``); world and tree files read it as
+    YAML 1.2 and Python do, a number. Booleans stay true/false only."""
+    from explore.core.user_files import parse_yaml
+
+    assert parse_yaml("a: 15e-2\nb: -2E+3\nc: 1.5e-3\nd: e5\ne: on\nf: 7", "x") == \
+        {"a": 0.15, "b": -2000.0, "c": 0.0015, "d": "e5", "e": "on", "f": 7}
+    path = tmp_path / "bunny.yaml"
+    path.write_text(Path(list_worlds()[0]).parent.joinpath("bunny_pedestal.yaml").read_text()
+                    .replace("size: 0.15", "size: 15e-2"))
+    assert load_world_spec(path).objects[0].size == pytest.approx(0.15)
+
+
 def test_bunny_rests_on_the_pedestal_at_the_requested_size(bunny_sim) -> None:
     bunny = bunny_sim.object_mesh("bunny")
     lo, hi = bunny.bounds

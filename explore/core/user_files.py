@@ -79,8 +79,10 @@ def parse_yaml(text: str, source: str) -> Any:
 
 
 class _Loader(yaml.SafeLoader):
-    """PyYAML's safe loader with YAML 1.2 booleans: only true/false. YAML 1.1 also reads yes/no/on/off
-    as booleans, which turned the tree attribute ``on:`` of a one_shot node into the key True."""
+    """PyYAML's safe loader with YAML 1.2 booleans and floats. Booleans: only true/false (YAML 1.1 also
+    reads yes/no/on/off as booleans, which turned the tree attribute ``on:`` of a one_shot node into the
+    key True). Floats: also an exponent without a dot, ``5e-3`` (YAML 1.1 asks for ``5.0e-3`` and
+    reads ``5e-3`` as the string '5e-3')."""
 
 
 _Loader.yaml_implicit_resolvers = {
@@ -89,6 +91,8 @@ _Loader.yaml_implicit_resolvers = {
 }
 _Loader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
                               list("tTfF"))
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
 
 
 def _line(node: yaml.Node) -> str:

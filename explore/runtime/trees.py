@@ -110,6 +110,8 @@ def find_tree(name_or_path: str | Path, relative_to: Path | None = None) -> Path
             path = folder / f"{name_or_path}{suffix}"
             if path.is_file():
                 return path.resolve()
+    if any((candidate if candidate.is_absolute() else base / candidate).is_dir() for base in bases):
+        raise BadInput(str(name_or_path), None, "is a folder, not a tree file")
     names = ", ".join(sorted({p.stem for f in tree_search_path() for p in f.glob("*.yaml")}))
     raise BadInput(str(name_or_path), None, f"no such tree file (shipped trees: {names})")
 

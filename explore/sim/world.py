@@ -98,6 +98,10 @@ def find_world(name_or_path: str | Path) -> Path:
             path = folder / f"{name_or_path}{suffix}"
             if path.is_file():
                 return path
+    if candidate.is_dir():
+        raise BadInput(str(name_or_path), None, "is a folder, not a world file")
+    if candidate.is_file():  # any other file given by its path: its parser says what is wrong with it
+        return candidate
     names = ", ".join(sorted(p.stem for p in list_worlds()))
     raise BadInput(str(name_or_path), None, f"no such world file (shipped worlds: {names})")
 
