@@ -70,14 +70,14 @@ class LikelihoodField:
         xyz = np.asarray(xyz, dtype=float)
         xyz = xyz[np.linspace(0, len(xyz) - 1, min(points, len(xyz))).astype(int)]
         pivot = np.asarray(pivot, dtype=float)[:2]
-        best = (-1.0, 0.0, np.zeros(2))
+        best = centre = (-1.0, 0.0, np.zeros(2))
         for _ in range(1 + max(0, int(recentre))):
-            centre = best
             found = self._search(xyz, pivot, centre[1], centre[2], search, search_yaw)
             if found[0] > best[0]:
                 best = found
-            if not (abs(found[1] - centre[1]) > search_yaw or np.any(np.abs(found[2] - centre[2]) > search)):
+            if abs(found[1] - centre[1]) <= search_yaw and np.all(np.abs(found[2] - centre[2]) <= search):
                 break
+            centre = found
         score, yaw, shift = best
         out = _turn_about(np.array([*pivot, 0.0]), np.array([0.0, 0.0, 1.0]), yaw)
         out[:2, 3] += shift
