@@ -254,16 +254,16 @@ def table(r: dict) -> str:
     lines = [
         f"room 5 x 5 x 2 m at {r['resolution'] * 1e3:g} mm, {r['views']} depth-camera views, {r['beams']} points",
         f"{'map':<28} {'points/s':>10} {'ratio':>6} {'memory':>10} {'ratio':>6}",
-        f"{'OctoMap (pyoctomap)':<28} {r['octomap_points_per_s'] / 1e6:>9.2f}M {1.0:>6.1f} "
+        f"{'OctoMap (pyoctomap)':<28} {r['octomap_points_per_s']:>10,.0f} {1.0:>6.1f} "
         f"{r['octomap_bytes'] * mb:>8.0f}MB {1.0:>6.2f}",
-        f"{'sparse PVS, OctoMap mode':<28} {r['sparse_om_points_per_s'] / 1e6:>9.2f}M {r['speed_ratio']:>6.1f} "
+        f"{'sparse PVS, OctoMap mode':<28} {r['sparse_om_points_per_s']:>10,.0f} {r['speed_ratio']:>6.1f} "
         f"{r['sparse_om_bytes'] * mb:>8.0f}MB {r['memory_ratio']:>6.2f}",
-        f"{'sparse PVS, sensor model':<28} {r['sparse_sm_points_per_s'] / 1e6:>9.2f}M "
+        f"{'sparse PVS, sensor model':<28} {r['sparse_sm_points_per_s']:>10,.0f} "
         f"{r['speed_ratio_sensor_model']:>6.1f} {r['sparse_sm_bytes'] * mb:>8.0f}MB "
         f"{r['memory_ratio_sensor_model']:>6.2f}",
     ]
     if "dense_points_per_s" in r:
-        lines.append(f"{'dense PVS, sensor model':<28} {r['dense_points_per_s'] / 1e6:>9.2f}M "
+        lines.append(f"{'dense PVS, sensor model':<28} {r['dense_points_per_s']:>10,.0f} "
                      f"{r['dense_points_per_s'] / r['octomap_points_per_s']:>6.1f} {r['dense_bytes'] * mb:>8.0f}MB "
                      f"{r['dense_bytes'] / r['octomap_bytes']:>6.2f}")
     lines += [
