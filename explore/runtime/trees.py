@@ -101,8 +101,8 @@ def find_tree(name_or_path: str | Path, relative_to: Path | None = None) -> Path
     """Resolve a tree given as a path (absolute, or relative to an including file) or a name."""
     candidate = check_path_name(name_or_path)
     bases = ([relative_to] if relative_to else []) + [Path.cwd()]
-    for base in bases:
-        path = candidate if candidate.is_absolute() else base / candidate
+    given = [candidate if candidate.is_absolute() else base / candidate for base in bases]
+    for path in given:
         if path.is_file():
             return path.resolve()
     for folder in tree_search_path():
@@ -110,7 +110,7 @@ def find_tree(name_or_path: str | Path, relative_to: Path | None = None) -> Path
             path = folder / f"{name_or_path}{suffix}"
             if path.is_file():
                 return path.resolve()
-    if any((candidate if candidate.is_absolute() else base / candidate).is_dir() for base in bases):
+    if any(path.is_dir() for path in given):
         raise BadInput(str(name_or_path), None, "is a folder, not a tree file")
     names = ", ".join(sorted({p.stem for f in tree_search_path() for p in f.glob("*.yaml")}))
     raise BadInput(str(name_or_path), None, f"no such tree file (shipped trees: {names})")
