@@ -461,8 +461,7 @@ class Recognition:
         scene = self.scene
         if obj.status != AMBIGUOUS:
             return
-        if obj.rivals and all(r.model == obj.model for r in obj.rivals):
-            # only the pose is in doubt (a shape sorter turned by 90°, a mug with its handle hidden):
+        if obj.rivals and obj.only_its_pose_in_doubt:
             # the views taken may each settle it alone, as the views of a rival-free object do
             self.collect_view_hypotheses(obj)
             self.fuse(obj)
@@ -524,8 +523,8 @@ class Recognition:
         turn is right the views cannot tell; that it is this model they all say. One view in ten that
         confirms a similar model (a block beside a part, ``tabletop_similar``) stays unconfirmed.
         """
-        if any(r.model != obj.model for r in obj.rivals) or obj.pose is None or not reaches(obj.q_h, self.min_q_h):
-            return []  # rivals of the same model (its other turns) leave only the pose in doubt
+        if not obj.only_its_pose_in_doubt or obj.pose is None or not reaches(obj.q_h, self.min_q_h):
+            return []
         views = sorted({v for v, h in obj.view_hypotheses if h.model == obj.model})
         needed = max(self.scene.settings.multi_view_agree + 1, math.ceil(checked / 2))
         return views if len(views) >= needed else []

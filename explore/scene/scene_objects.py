@@ -93,6 +93,12 @@ class SceneObject:
     _sample: Points3 | None = field(default=None, repr=False)
 
     @property
+    def only_its_pose_in_doubt(self) -> bool:
+        """No other model rivals its model: rivals, if any, are the same model at other turns (a shape
+        sorter turned by 90°, a mug with its handle hidden)."""
+        return all(r.model == self.model for r in self.rivals)
+
+    @property
     def explained(self) -> bool:
         return self.status in EXPLAINED
 
