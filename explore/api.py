@@ -83,7 +83,7 @@ from explore.motion import (
     Part,
     Robot,
 )
-from explore.nbv import CONTINUE, STOP, SWITCH, Candidate, Decision, PlanningContext, make_target
+from explore.nbv import CONTINUE, FALLBACK, STOP, SWITCH, Candidate, Decision, PlanningContext, make_target
 from explore.nbv.area_factor import AreaFactor
 from explore.nbv.strategy import OVERRIDES, Strategy, StrategyPlugin, make_strategy
 from explore.nbv.termination import Termination
@@ -151,6 +151,7 @@ __all__ = [
     "REAR_VOXEL",
     "STOP",
     "SUCCESS",
+    "FALLBACK",
     "SWITCH",
     "TRAVERSED",
     "UNKNOWN_VOXELS",

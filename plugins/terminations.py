@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from explore.api import Termination
 from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Param, reaches
-from explore.nbv import CONTINUE, STOP, SWITCH, Decision, PlanningContext
+from explore.nbv import CONTINUE, FALLBACK, STOP, SWITCH, Decision, PlanningContext
 
 
 def window_ends(history: list[float], window: int) -> tuple[float, float] | None:
@@ -43,7 +43,11 @@ class CoverageTarget(Termination):
     finds a cavity that the fan areas of its small openings do not count. With
     ``saturated_coverage`` < 1 it also stops at that ĉ_m once ĉ_m has stopped growing: shapes whose
     many small holes no view closes (parts of several bodies, thin bars) keep boundary or hole
-    candidates that add no surface, and would otherwise scan on to n_abort.
+    candidates that add no surface, and would otherwise scan on to n_abort. Boundary search and hole
+    rescan also stall in front of a cavity they have no candidate into (a shape sorter's inside,
+    seen through its openings), so if no fallback view (over all directions) has been scanned yet
+    and the session has a fallback generator, the first saturation only offers its candidates
+    (``FALLBACK``), and the stop waits two scans for them.
     """
 
     name = "coverage_target"
@@ -70,6 +74,7 @@ class CoverageTarget(Termination):
 
     def reset(self) -> None:
         self.switched = False
+        self.offered_at: int | None = None  # scan count at which the fallback's candidates were offered
 
     def estimate(self, ctx: PlanningContext) -> float:
         if self.measure == "border":
@@ -99,7 +104,12 @@ class CoverageTarget(Termination):
                 and reaches(d, self.density) and not reaches(gain := ends[1] - ends[0], self.saturation_delta):
             reason = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage} grew by {gain:.4f} < {self.saturation_delta} "
                       f"over {self.saturation_scans} scans, d̄_m = {d:.3f} >= {self.density}")
-            return Decision(STOP, reason, SUCCESS, min(self.saturation_delta - gain, c - self.saturated_coverage))
+            margin = min(self.saturation_delta - gain, c - self.saturated_coverage)
+            if ctx.fallback_available and not ctx.fallback_scans and self.offered_at is None:
+                self.offered_at = ctx.iteration
+                return Decision(FALLBACK, f"{reason}: the fallback's views are offered first", margin=margin)
+            if self.offered_at is None or ctx.iteration - self.offered_at >= 2:
+                return Decision(STOP, reason, SUCCESS, margin)
         if ctx.iteration >= self.n_abort:
             return Decision(STOP, f"n_abort = {self.n_abort} scans reached (ĉ_m = {c:.3f}, d̄_m = {d:.3f})", BUDGET,
                             margin)

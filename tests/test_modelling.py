@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from explore.mapping import VoxelGrid
-from explore.nbv import CONTINUE, STOP, SWITCH, Candidate, CandidateStack, PlanningContext
+from explore.nbv import CONTINUE, FALLBACK, STOP, SWITCH, Candidate, CandidateStack, Decision, PlanningContext
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -81,6 +81,19 @@ def test_terminations(registry) -> None:  # noqa: ANN001
         decision = calibrated.decide(ctx)
         assert decision.stop == stop, (history, exhausted, off_support, fallback_scans, decision)
         assert not stop or decision.outcome == "success"
+    # saturated before any fallback view: the session's fallback is offered first, the stop comes two scans later
+    saturated = [0.5, 0.8, 0.803, 0.805, 0.806, 0.807, 0.808]
+    calibrated.reset()
+    ctx = ctx_with(saturated)
+    ctx.fallback_available, ctx.off_support_history = True, [0.9]
+    assert calibrated.decide(ctx).action == FALLBACK
+    for more, stop in (([0.809], False), ([0.809, 0.81], True)):
+        ctx = ctx_with(saturated + more)
+        ctx.fallback_available, ctx.off_support_history = True, [0.9]
+        assert calibrated.decide(ctx).stop == stop, more
+    calibrated.reset()
+    ctx.fallback_scans = 1  # a fallback view was already scanned: saturation stops at once
+    assert calibrated.decide(ctx).stop
     below = registry.create("termination", "unknown_below", {"threshold": 30})
     ctx.best_diagnostics = {"unknown_first": 12.0}
     assert below.decide(ctx).stop and "12" in below.decide(ctx).reason
@@ -177,6 +190,34 @@ def test_step_by_step_api(open_world, registry) -> None:  # noqa: ANN001
         best = session.select()
         assert best is not None and np.isfinite(best.score) and "entropy" in best.diagnostics
         assert session.terminate().action in (CONTINUE, SWITCH)
+
+
+@pytest.mark.slow
+def test_a_fallback_decision_makes_the_next_scan_a_fallback_view(open_world, registry) -> None:  # noqa: ANN001
+    """A termination's FALLBACK puts the fallback generator's views on the stack, and the next selection
+    takes the best of them although the strategy's own candidates are there too."""
+    from explore.nbv import ModellingSession
+
+    class OfferFallback:
+        def decide(self, ctx: PlanningContext) -> Decision:
+            return Decision(FALLBACK, "saturated")
+
+    class PreferOwn:  # scores the strategy's own candidates above the fallback's
+        def score(self, items: list[Candidate], ctx: PlanningContext) -> list[float]:
+            return [0.5 if c.source.startswith("fallback_") else 1.0 for c in items]
+
+    with open_world("bunny_pedestal") as sim:
+        session = ModellingSession(sim, "ig_quality/bs_hr", registry, seed=1, max_scans=3, fallback_generator="sphere")
+        assert session.ctx.fallback_available
+        session.integrate(session.acquire(session.initial_target())[0])
+        own = session.generate()
+        assert own > 0 and all(not c.source.startswith("fallback_") for c in session.stack)
+        session.termination = OfferFallback()
+        assert session.terminate().action == FALLBACK
+        assert len(session.stack) > own
+        session.utility = PreferOwn()
+        assert session.select().source == "fallback_sphere"
+        assert session.select().source != "fallback_sphere"  # only the one selection is steered
 
 
 def build_backend_offline() -> bool:

@@ -7,6 +7,7 @@ from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import (
     BETAS_DEG,
     CONTINUE,
+    FALLBACK,
     STOP,
     SWITCH,
     Candidate,
@@ -61,6 +62,7 @@ __all__ = [
     "RepairSettings",
     "STAGES",
     "STOP",
+    "FALLBACK",
     "SWITCH",
     "StateSamples",
     "Strategy",

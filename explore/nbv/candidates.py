@@ -22,12 +22,13 @@ if TYPE_CHECKING:
     from explore.mapping import VoxelGrid
     from explore.sim import RaySensor
 
-CONTINUE, SWITCH, STOP = "continue", "switch", "stop"
+CONTINUE, SWITCH, STOP, FALLBACK = "continue", "switch", "stop", "fallback"
 
 
 @dataclass(frozen=True)
 class Decision:
-    """What a termination rule decided: ``continue``, ``switch`` (mode) or ``stop``, and why."""
+    """What a termination rule decided: ``continue``, ``switch`` (mode), ``fallback`` (offer the fallback
+    generator's candidates too) or ``stop``, and why."""
 
     action: str = CONTINUE
     reason: str = ""
@@ -174,6 +175,7 @@ class PlanningContext:
     coverage_history: list[float] = field(default_factory=list)
     off_support_history: list[float] = field(default_factory=list)
     fallback_scans: int = 0  # scans of candidates from the session's fallback generator
+    fallback_available: bool = False  # the session has a fallback generator (a FALLBACK decision offers it)
     density_history: list[float] = field(default_factory=list)
     unknown_history: list[int] = field(default_factory=list)
     mode: str = "boundary"

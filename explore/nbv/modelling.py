@@ -137,7 +137,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
         self.ctx = PlanningContext(
             pvs=self.pvs, surface=self.surface, grid=self._snapshot(), sensor=self.sensor, robot=self.robot,
             region_min=region_min, region_max=region_max, environment_boxes=self._environment_boxes(),
-            stack=self.stack, rng=self.rng_plan, registry=registry,
+            stack=self.stack, rng=self.rng_plan, registry=registry, fallback_available=self.fallback is not None,
             standoff=modelling_standoff(self.sensor, self.surface.point_spacing) if standoff is None else standoff,
         )
         self.records: list[ScanRecord] = []
@@ -160,6 +160,7 @@ class ModellingSession(Evaluation, CandidatePlanning):
                                  noise=bool(noise), relocalise=bool(relocalise))
         self.planner = self.motion.planner
         self.plan_failure = ""
+        self.take_fallback = False  # the next selection picks among the fallback's candidates (a FALLBACK decision)
         self._new_pending()
 
     # -- setup helpers -------------------------------------------------------------------

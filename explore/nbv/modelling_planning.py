@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from explore.core import BUDGET, pick_best
-from explore.nbv.candidates import STOP, SWITCH, Candidate, Decision
+from explore.nbv.candidates import FALLBACK, STOP, SWITCH, Candidate, Decision
 from explore.nbv.modelling_records import FALLBACK_PREFIX, failure_summary
 from explore.nbv.scan_planning import KEEP_FOR_LATER, ScanPlan
 
@@ -68,6 +68,11 @@ class CandidatePlanning:
             self._pending["selection_s"] = elapsed
         else:
             scores = np.array([c.score for c in items], dtype=float)
+        if self.take_fallback:  # the termination asked for one view of the fallback's (see terminate)
+            self.take_fallback = False
+            offered = np.array([c.source.startswith(FALLBACK_PREFIX) for c in items])
+            if offered.any():
+                scores = np.where(offered, scores, -np.inf)
         pick = pick_best(scores)  # near-ties go to the first candidate in stack order
         chosen = self.stack.pop(pick.index if pick is not None else 0)
         self._pending["margin"] = pick.margin if pick is not None else float("nan")
@@ -83,12 +88,17 @@ class CandidatePlanning:
         return float(self._pending["margin"])
 
     def terminate(self) -> Decision:
-        """Ask the termination plugin (and the hard cap); a ``switch`` sets the hole mode."""
+        """Ask the termination plugin (and the hard cap); a ``switch`` sets the hole mode, a ``fallback``
+        puts the fallback generator's candidates on the stack and makes the next selection pick the best
+        of them (the strategy's own candidates stall: one view chosen over all directions first)."""
         if self.n_scans >= self.max_scans:
             return Decision(STOP, f"max_scans = {self.max_scans} reached", BUDGET)
         decision = self.termination.decide(self.ctx)
         if decision.action == SWITCH:
             self.ctx.mode = "hole"
+        if decision.action == FALLBACK and self.fallback is not None:
+            self.stack.push(self._fallback_candidates())
+            self.take_fallback = True
         self._pending.update(decision=decision.action, reason=decision.reason, termination_margin=decision.margin)
         return decision
 

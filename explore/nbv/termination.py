@@ -1,4 +1,4 @@
-"""The termination contract: whether to continue, switch the generator's mode or stop."""
+"""The termination contract: whether to continue, switch the generator's mode, offer the fallback or stop."""
 
 from __future__ import annotations
 
@@ -10,13 +10,15 @@ from explore.nbv.candidates import Decision, PlanningContext
 
 
 class Termination(Plugin, ABC):
-    """Contract of kind ``termination``: after each scan, continue, switch or stop.
+    """Contract of kind ``termination``: after each scan, continue, switch, offer the fallback or stop.
 
     :meth:`decide` reads the :class:`~explore.nbv.candidates.PlanningContext` (ĉ_m and d̄_m
     histories, scan count, the candidate stack, ``exhausted`` when the strategy's generator had
     nothing left (a fallback's candidates may be on the stack), the last selection's
     diagnostics; never the ground truth) and returns a :class:`~explore.nbv.candidates.Decision`: ``CONTINUE``,
-    ``SWITCH`` (the generator's next mode, e.g. boundary to hole) or ``STOP`` with an outcome
+    ``SWITCH`` (the generator's next mode, e.g. boundary to hole), ``FALLBACK`` (when ``ctx.fallback_available``:
+    the session puts its fallback generator's candidates on the stack and scans the best of them next)
+    or ``STOP`` with an outcome
     (``explore.core.outcomes``: ``success`` only when the goal was reached, ``budget_exhausted``,
     ``no_candidates``) and a one-line reason.
     """
