@@ -87,7 +87,8 @@ class VasquezEU(StrategyPlugin):
 #: or ĉ_m 80 % once it grew by less than 1 point over 5 scans (the candidates add no surface; before any
 #: fallback view, the first such stall scans the fallback's best view first and stops two scans later)
 CALIBRATED_TERMINATION = {"coverage": 0.95, "exhausted_coverage": 0.90, "off_support_coverage": 0.99,
-                          "saturated_coverage": 0.80, "saturation_scans": 5, "saturation_delta": 0.01,
+                          "saturated_coverage": 0.80, "saturated_off_support": 0.90, "saturation_scans": 5,
+                          "saturation_delta": 0.01,
                           "density": 0.2, "n_abort": 30}
 
 EXTRA = [

@@ -47,7 +47,10 @@ class CoverageTarget(Termination):
     rescan also stall in front of a cavity they have no candidate into (a shape sorter's inside,
     seen through its openings), so if no fallback view (over all directions) has been scanned yet
     and the session has a fallback generator, the first saturation only offers its candidates
-    (``FALLBACK``), and the stop waits two scans for them.
+    (``FALLBACK``), and the stop waits two scans for them. With ``saturated_off_support`` < 1 a
+    saturated ĉ_m also stops at that ĉ_m without the support opening: under a part that overhangs
+    its support the open underside's loop leaves the support plane, the third clause does not leave
+    all of it out, and ĉ_m stays below ``saturated_coverage`` however complete the model.
     """
 
     name = "coverage_target"
@@ -68,6 +71,9 @@ class CoverageTarget(Termination):
         Param("saturated_coverage", float, 1.0, "", "also stop at this ĉ_m once it grew by less than "
               "saturation_delta over the last saturation_scans scans (the candidates add no surface); 1 = never",
               low=0.0, high=1.0),
+        Param("saturated_off_support", float, 1.0, "", "the saturation stop also at this ĉ_m without the "
+              "support opening (a part overhanging its support, whose open underside the third clause misses "
+              "where its loop leaves the support plane); 1 = never", low=0.0, high=1.0),
         Param("saturation_scans", int, 3, "", "scans over which ĉ_m must grow", low=1),
         Param("saturation_delta", float, 0.01, "", "growth of ĉ_m below which it has saturated", low=0.0),
     )
@@ -100,11 +106,15 @@ class CoverageTarget(Termination):
             return Decision(STOP, reason, SUCCESS, min(off - self.off_support_coverage, d - self.density))
         history = ctx.coverage_history
         ends = window_ends(history, self.saturation_scans)
-        if self.saturated_coverage < 1.0 and ends is not None and reaches(c, self.saturated_coverage) \
-                and reaches(d, self.density) and not reaches(gain := ends[1] - ends[0], self.saturation_delta):
-            reason = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage} grew by {gain:.4f} < {self.saturation_delta} "
-                      f"over {self.saturation_scans} scans, d̄_m = {d:.3f} >= {self.density}")
-            margin = min(self.saturation_delta - gain, c - self.saturated_coverage)
+        high = reaches(c, self.saturated_coverage) or reaches(off, self.saturated_off_support)
+        if self.saturated_coverage < 1.0 and ends is not None and high and reaches(d, self.density) \
+                and not reaches(gain := ends[1] - ends[0], self.saturation_delta):
+            level = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage}" if reaches(c, self.saturated_coverage) else
+                     f"ĉ_m = {c:.3f} (without the support opening {off:.3f} >= {self.saturated_off_support})")
+            reason = (f"{level} grew by {gain:.4f} < {self.saturation_delta} over {self.saturation_scans} scans, "
+                      f"d̄_m = {d:.3f} >= {self.density}")
+            margin = min(self.saturation_delta - gain,
+                         max(c - self.saturated_coverage, off - self.saturated_off_support))
             if ctx.fallback_available and not ctx.fallback_scans and self.offered_at is None:
                 self.offered_at = ctx.iteration
                 return Decision(FALLBACK, f"{reason}: the fallback's views are offered first", margin=margin)

@@ -27,8 +27,8 @@ CONTINUE, SWITCH, STOP, FALLBACK = "continue", "switch", "stop", "fallback"
 
 @dataclass(frozen=True)
 class Decision:
-    """What a termination rule decided: ``continue``, ``switch`` (mode), ``fallback`` (offer the fallback
-    generator's candidates too) or ``stop``, and why."""
+    """What a termination rule decided: ``continue``, ``switch`` (mode), ``fallback`` (scan the best of the
+    fallback generator's candidates next) or ``stop``, and why."""
 
     action: str = CONTINUE
     reason: str = ""
