@@ -40,8 +40,9 @@ def stop_index(run: dict, rule: tuple[float, float, float], density: float, fall
     ``saturation`` (F, W, D) adds the clause: stop at ĉ_m >= F once it grew by less than D over the
     last W scans. Unlike the second clause it is replayed exactly (it reads the curve only), as the
     rule stood when it was chosen (0aec002): since then a saturation before any fallback view first
-    offers the fallback's views and stops two scans later (``coverage_target``), which a replay of
-    recorded curves cannot model; such a choice is checked by running it."""
+    offers the fallback's views and stops two scans later, and the clause also fires at ĉ_m without the
+    support opening >= ``saturated_off_support`` (``coverage_target``); a replay of recorded curves
+    models neither, so such a choice is checked by running it."""
     main, exhausted, off_support = rule
     est, off, dens, sources = run["coverage_estimate"], run["coverage_off_support"], run["density"], run["sources"]
     fallback_scans = 0

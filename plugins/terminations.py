@@ -106,10 +106,11 @@ class CoverageTarget(Termination):
             return Decision(STOP, reason, SUCCESS, min(off - self.off_support_coverage, d - self.density))
         history = ctx.coverage_history
         ends = window_ends(history, self.saturation_scans)
-        high = reaches(c, self.saturated_coverage) or reaches(off, self.saturated_off_support)
+        at_floor = reaches(c, self.saturated_coverage)
+        high = at_floor or reaches(off, self.saturated_off_support)
         if self.saturated_coverage < 1.0 and ends is not None and high and reaches(d, self.density) \
                 and not reaches(gain := ends[1] - ends[0], self.saturation_delta):
-            level = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage}" if reaches(c, self.saturated_coverage) else
+            level = (f"ĉ_m = {c:.3f} >= {self.saturated_coverage}" if at_floor else
                      f"ĉ_m = {c:.3f} (without the support opening {off:.3f} >= {self.saturated_off_support})")
             reason = (f"{level} grew by {gain:.4f} < {self.saturation_delta} over {self.saturation_scans} scans, "
                       f"d̄_m = {d:.3f} >= {self.density}")
