@@ -10,15 +10,19 @@ segmentation can part them) and a random yaw.
 
 The robots are those of ``two_tables`` (``mobile_base``: a pan-tilt RGB-D camera on a 1.3 m
 mast) and ``scene_small_mm`` (``mobile_manipulator``: the camera in the iiwa's hand), both with
-the planar localisation laser and legs of a metre; the camera is a Kinect-like 320 x 240.
+the planar localisation laser and legs of a metre; the camera is a Kinect-like 320 x 240 RGB-D camera.
+A ``random_urdfs`` shape has the colour its URDF gives it (its mesh's material is plain grey): among
+them are shape twins of different colour, which only colour tells apart.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pybullet_data
 import yaml
 
 TABLE = (1.2, 0.8, 0.72)
@@ -37,7 +41,13 @@ ROBOTS: dict[str, dict[str, Any]] = {
                                       "replan_distance": 1.0}},
 }
 SENSOR = {"plugin": "depth_camera", "params": {"profile": "kinect", "width": 320, "height": 240, "min_range": 0.3,
-                                                "max_range": 3.5}}
+                                                "max_range": 3.5, "color": True}}
+
+
+def urdf_colour(draw: int) -> list[float]:
+    """The RGBA colour the URDF of ``random_urdfs/<draw>`` gives its shape."""
+    text = (Path(pybullet_data.getDataPath()) / f"random_urdfs/{draw:03d}/{draw:03d}.urdf").read_text()
+    return [float(v) for v in re.search(r'<color rgba="([^"]+)"', text).group(1).split()]
 
 
 def table_centres(tables: int) -> list[tuple[float, float]]:
@@ -66,6 +76,7 @@ def _objects(tables: int, count: int, seed: int) -> list[dict[str, Any]]:
         raise ValueError(problem)
     draws = [(f"random_{d:03d}", f"random_urdfs/{d:03d}/{d:03d}.obj", [0, 0, 0], 0.10)
              for d in rng.choice(1000, size=count, replace=False)]
+    colours = {label: urdf_colour(int(label[7:])) for label, *_ in draws}
     known, unknown = list(KNOWN) + draws[::2], list(NAMED) + draws[1::2]
     cells = [(t, i, j) for t in range(tables) for i in range(GRID[0]) for j in range(GRID[1])]
     # objects spread evenly over the tables: the k-th object on table k mod tables
@@ -83,6 +94,7 @@ def _objects(tables: int, count: int, seed: int) -> list[dict[str, Any]]:
         turned = [rpy[0], rpy[1], round(rpy[2] + yaw, 1)]
         out.append({"name": label, "source": source, "size": size, "rpy_deg": turned,
                     "position": [round(x, 3), round(y, 3)], "on_top_of": f"table_{t + 1}",
+                    **({"color": colours[label]} if label in colours else {}),
                     **({"known": True} if k % 3 == 0 else {})})
     return out
 

@@ -3,6 +3,14 @@ object database.
 """
 
 # The names other packages use (they import from the package, never from its modules).
+from explore.perception.colour import (
+    COLOUR_KIND,
+    ColourSignature,
+    chromaticity,
+    colour_agreement,
+    colour_signature,
+    shows_colours_of,
+)
 from explore.perception.contracts import (
     PlaneRegistrar,
     PoseValidator,
@@ -69,6 +77,12 @@ from explore.perception.verification import icp_refine, inlier_fraction, render_
 from explore.perception.vfh import VFHRecognizer, vfh_signature
 
 __all__ = [
+    "COLOUR_KIND",
+    "ColourSignature",
+    "chromaticity",
+    "colour_agreement",
+    "colour_signature",
+    "shows_colours_of",
     "PlanarSurface",
     "icp_refine",
     "inlier_fraction",

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import BadInput, Pose, brief, check_path_name
+from explore.perception.colour import COLOUR_KIND, ColourSignature, chromaticity
 from explore.perception.database_files import (
     APPLICATION_ID,
     BUSY_TIMEOUT_S,
@@ -417,15 +418,18 @@ class ObjectDatabase:
             if only_known and not body.known:
                 continue
             world_T_model, mesh = object_frame(body)
-            if body.name not in self and self._seed(body.name, mesh, sim.spec.name):
+            rgb = sim.body_colour(body)
+            colour = {} if rgb is None else {COLOUR_KIND: ColourSignature(chromaticity(255.0 * rgb), np.ones(1))
+                                             .as_array()}
+            if body.name not in self and self._seed(body.name, mesh, sim.spec.name, colour):
                 self.set_location(body.name, sim.spec.name, world_T_model, np.vstack(body.mesh.bounds))
             poses[body.name] = world_T_model
         return poses
 
-    def _seed(self, name: str, mesh: TriMesh, world: str) -> bool:
+    def _seed(self, name: str, mesh: TriMesh, world: str, descriptors: Mapping[str, np.ndarray]) -> bool:
         """Add a known object; False when another run sharing the database added it meanwhile."""
         try:
-            self.add(name, mesh, provenance="given", world=world)
+            self.add(name, mesh, provenance="given", world=world, descriptors=descriptors)
         except NameTaken:
             return False
         return True

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose, pose_error, reaches
+from explore.perception.colour import COLOUR_KIND, ColourSignature
 from explore.sim import Scan, TriMesh
 
 ScanSource = Scan | Sequence[Scan] | Mapping[int, Scan]
@@ -41,6 +42,12 @@ class Model:
     def diameter(self) -> float:
         lo, hi = self.mesh.bounds
         return float(np.linalg.norm(hi - lo))
+
+    @property
+    def colour(self) -> ColourSignature | None:
+        """The colours stored with the model (None: stored without colour, e.g. learned by a depth-only sensor)."""
+        stored = self.descriptors.get(COLOUR_KIND)
+        return None if stored is None else ColourSignature.from_array(stored[0])
 
     def key(self) -> tuple[str, int, float]:
         """Identity for caches: name, vertex count and a checksum of the vertices."""

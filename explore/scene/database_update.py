@@ -10,8 +10,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from explore.perception import (
+    COLOUR_KIND,
     Model,
     NameTaken,
+    colour_signature,
 )
 from explore.scene.scene_objects import (
     RECOGNISED,
@@ -45,6 +47,9 @@ class DatabaseUpdate:
         kinds = {r.descriptor_kind for r in chosen}
         chosen += [r for r in (PPFRecognizer(), VFHRecognizer()) if r.descriptor_kind not in kinds]
         descriptors = model_descriptors(Model(name, mesh), chosen)
+        colours = scene.recognition.cluster_colours(obj.cluster)
+        if colours is not None and (signature := colour_signature(colours)) is not None:
+            descriptors[COLOUR_KIND] = signature.as_array()
         coverage = float(np.clip(obj.coverage_estimate, 0.0, 1.0))
         while True:
             try:

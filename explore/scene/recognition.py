@@ -19,6 +19,7 @@ from explore.perception import (
     Cluster,
     FusedPose,
     Hypothesis,
+    Model,
     ModelCloud,
     distance_to_model,
     fuse_poses,
@@ -27,6 +28,7 @@ from explore.perception import (
     model_cloud,
     render_and_compare,
     rivals,
+    shows_colours_of,
     surfaces_coincide,
 )
 from explore.scene.scene_objects import (
@@ -81,12 +83,41 @@ class Recognition:
         keep = ids[np.argsort(-counts, kind="stable")[: scene.settings.recognition_views]]
         return obj.cluster.subset(np.isin(obj.cluster.views, keep))
 
+    def cluster_colours(self, cluster: Cluster) -> np.ndarray | None:
+        """RGB (n, 3) of the cluster's points, from the colour images of the views they came from; None when
+        one of those views has no colour (a depth-only sensor)."""
+        scans = self.scene.viewing.scans(cluster.view_ids)
+        if not scans or any(scan.colors is None for scan in scans.values()):
+            return None
+        out = np.zeros((len(cluster.points), 3), dtype=np.uint8)
+        for view, scan in scans.items():
+            mine = cluster.views == view
+            out[mine] = scan.colors[cluster.beams[mine]]
+        return out
+
+    def colour_candidates(self, obj: SceneObject, cluster: Cluster, models: Sequence[Model]) -> list[Model]:
+        """The models whose stored colours the cluster shows (all of them without colour on either side): a
+        shape twin of another colour is no candidate (room40's red and cyan blocks of one size)."""
+        colours = self.cluster_colours(cluster)
+        if colours is None:
+            return list(models)
+        kept = []
+        for model in models:
+            fits, agreement = shows_colours_of(model.colour, colours)
+            if fits:
+                kept.append(model)
+            elif (note := f"{model.name} ruled out by colour ({agreement:.2f} of its points show its colours)") \
+                    not in obj.events:
+                obj.note(note)
+        return kept
+
     def recognise(self, obj: SceneObject) -> list[Hypothesis]:
-        """Hypotheses for the object's cluster (its best-covered views) from every database model."""
+        """Hypotheses for the object's cluster (its best-covered views) from every database model whose
+        colours it shows."""
         scene = self.scene
         start = time.perf_counter()
-        models = scene.models
         cluster = self.recognition_cluster(obj)
+        models = self.colour_candidates(obj, cluster, scene.models)
         scans = scene.viewing.scans(cluster.view_ids)
         obj.hypotheses = scene.recognizer.recognize(cluster, models, scans) if models else []
         scene.timed("recognise_s", start)
@@ -313,8 +344,8 @@ class Recognition:
         part = obj.cluster.only_view(view)
         if len(part.points) < 10:
             return None
-        models = [m for m in scene.models if names is None or m.name in names]
-        hypotheses = scene.recognizer.recognize(part, models, {view: scene.views[view].scan})
+        models = self.colour_candidates(obj, part, [m for m in scene.models if names is None or m.name in names])
+        hypotheses = scene.recognizer.recognize(part, models, {view: scene.views[view].scan}) if models else []
         why = []
         for h in scene.recognizer.accept(hypotheses):
             why.append(f"{h.model} q_h {h.q_h:.2f} fit {h.render_fit:.2f}")

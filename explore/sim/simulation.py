@@ -354,6 +354,16 @@ class Simulation:
     def objects(self) -> list[GroundTruthBody]:
         return [b for b in self.bodies if b.is_object]
 
+    def body_colour(self, body: GroundTruthBody) -> np.ndarray | None:
+        """The one RGB colour (3,) in [0, 1] of a body's untextured visual shapes, as a given model's material
+        tells it; None when its shapes carry textures or differ in colour."""
+        shapes = p.getVisualShapeData(body.body_id, flags=p.VISUAL_SHAPE_DATA_TEXTURE_UNIQUE_IDS,
+                                      physicsClientId=self.client)
+        if not shapes or any(shape[8] >= 0 for shape in shapes):
+            return None
+        colours = np.array([shape[7][:3] for shape in shapes], dtype=float)
+        return colours[0] if np.ptp(colours, axis=0).max() < 1e-3 else None
+
     def environment_ids(self) -> list[int]:
         """pybullet ids of the known static environment (what a planner may know)."""
         return [b.body_id for b in self.bodies if not b.is_object]
