@@ -18,8 +18,8 @@ import numpy as np
 MIN_BRIGHTNESS = 60.0
 #: bright points needed before colours say anything
 MIN_POINTS = 30
-#: width of the chromaticity bins a signature is made of
-BIN = 0.03
+#: width of the chromaticity bins a signature is gathered from
+BIN = 0.01
 #: share of an object's bright points a bin needs to be one of its colours
 MIN_SHARE = 0.05
 #: chromaticity distance within which a point shows one of a model's colours: a pixel's chromaticity moves
@@ -58,19 +58,30 @@ def chromaticity(rgb: np.ndarray) -> np.ndarray:
 
 
 def colour_signature(rgb: np.ndarray) -> ColourSignature | None:
-    """The colours an object's pixels (n, 3) show: the mean chromaticity of every ``BIN``-wide bin holding
-    at least ``MIN_SHARE`` of its bright pixels; None when too few pixels are bright."""
+    """The colours an object's pixels (n, 3) show: their chromaticities gathered into colours no wider than
+    ``TOLERANCE`` (the fullest ``BIN``-wide bins first, each joining the first colour within reach), each with
+    its share of the bright pixels; those holding at least ``MIN_SHARE``. None when too few pixels are
+    bright or no colour holds that share (a speckled texture)."""
     chroma = chromaticity(rgb)
     if len(chroma) < MIN_POINTS:
         return None
-    keys = np.floor(chroma / BIN).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(np.floor(chroma / BIN).astype(np.int64), axis=0, return_inverse=True,
+                                   return_counts=True)
     inverse = inverse.reshape(-1)
-    kept = np.flatnonzero(counts >= MIN_SHARE * len(chroma))
-    if len(kept) == 0:  # no colour dominates (a speckled texture): no signature to test against
+    bin_means = np.array([chroma[inverse == k].mean(axis=0) for k in range(len(counts))])
+    colours: list[int] = []  # the bin each colour started from
+    colour_of_bin = np.empty(len(counts), dtype=np.int64)
+    for k in np.argsort(-counts, kind="stable"):
+        near = [c for c, seed in enumerate(colours) if np.linalg.norm(bin_means[k] - bin_means[seed]) <= TOLERANCE]
+        colour_of_bin[k] = near[0] if near else len(colours)
+        if not near:
+            colours.append(int(k))
+    of_point = colour_of_bin[inverse]
+    shares = np.bincount(of_point, minlength=len(colours)) / len(chroma)
+    kept = np.flatnonzero(shares >= MIN_SHARE)
+    if len(kept) == 0:
         return None
-    centres = np.array([chroma[inverse == k].mean(axis=0) for k in kept])
-    return ColourSignature(centres, counts[kept] / len(chroma))
+    return ColourSignature(np.array([chroma[of_point == c].mean(axis=0) for c in kept]), shares[kept])
 
 
 def colour_agreement(signature: ColourSignature, rgb: np.ndarray) -> float:
