@@ -83,6 +83,7 @@ def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: 
         worst_map_error=None if not errors else [round(max(e[0] for e in errors), 1),
                                                  round(max(e[1] for e in errors), 2)],
         wrong_accepted=metrics["wrong_matches"]["accepted"],
+        wrong_rejected_colour=metrics["wrong_matches"].get("rejected_colour", 0),
         # objects recognised as another object's model, and of those the ones taken for a model of the
         # same shape: the wrong model lies within 5 mm of the object's surface (no geometric recogniser
         # can tell them apart)

@@ -114,6 +114,7 @@ def part_scene(args: argparse.Namespace, registry: Any) -> list[dict[str, Any]]:
                             "all_explained": metrics["all_explained"], "views": metrics["views"],
                             "time_s": elapsed, "wrong_proposed": metrics["wrong_matches"]["proposed"],
                             "wrong_rejected_q_h": metrics["wrong_matches"]["rejected_q_h"],
+                            "wrong_rejected_colour": metrics["wrong_matches"]["rejected_colour"],
                             "wrong_rejected_pvs": metrics["wrong_matches"]["rejected_pvs"],
                             "wrong_accepted": metrics["wrong_matches"]["accepted"],
                             "precision": metrics["recognition_precision"], "recall": metrics["recognition_recall"],

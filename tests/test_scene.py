@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from explore.core import BadInput
-from explore.perception import ObjectDatabase
+from explore.perception import ObjectDatabase, colour_agreement
 from explore.scene import SceneSession, close_holes
 from explore.sim import RayCaster
 
@@ -93,7 +93,8 @@ def test_scene_exploration_tree_explains_every_object(small_run):
     sorter = rows["sorter"]
     assert sorter["result"] == "modelled" and sorter["coverage"] >= 0.85, sorter
     wrong = m["wrong_matches"]
-    assert wrong["accepted"] == 0 and wrong["proposed"] == wrong["rejected_q_h"] + wrong["rejected_pvs"] > 0
+    rejected = wrong["rejected_q_h"] + wrong["rejected_colour"] + wrong["rejected_pvs"]
+    assert wrong["accepted"] == 0 and wrong["proposed"] == rejected > 0
     assert m["recognition_precision"] == 1.0 and m["recognition_recall"] == 1.0
     out = result.out_dir
     assert (out / "scene.png").stat().st_size > 10000 and (out / "pvs.npz").is_file() and (out / "pvs.bt").is_file()
@@ -142,11 +143,22 @@ def _first_round(open_world, registry, tmp_path, text: str):
         yield sim, db, scene
 
 
-def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_path):
-    """Bad input: a block touching the duck forms one cluster; the duck is recognised and the points it
-    does not explain become a second object (to be modelled)."""
+def _coloured(text: str) -> str:
+    """The touching scene seen by an RGB-D camera, a yellow duck touching a blue block."""
+    duck = "on_top_of: table,\n     known: true"
+    return (text.replace(duck + "}", duck + ", color: [1.0, 0.8, 0.2, 1.0]}")
+            .replace("on_top_of: table}", "on_top_of: table, color: [0.2, 0.3, 0.8, 1.0]}")
+            .replace("max_range: 2.0}", "max_range: 2.0, color: true}"))
 
-    with _first_round(open_world, registry, tmp_path, TOUCHING) as (sim, db, scene):
+
+@pytest.mark.parametrize("coloured", [False, True], ids=["depth", "rgbd"])
+def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_path, coloured):
+    """Bad input: a block touching the duck forms one cluster; the duck is recognised and the points it
+    does not explain become a second object (to be modelled). Seen in colour, the cluster is half
+    yellow and half blue: the duck's colour is checked on the points its model explains only."""
+    text = _coloured(TOUCHING) if coloured else TOUCHING
+    assert not coloured or text.count("color:") == 3
+    with _first_round(open_world, registry, tmp_path, text) as (sim, db, scene):
         objects = scene.candidates()
         assert len(objects) == 2
         duck = next(o for o in objects if o.model == "duck")
@@ -154,6 +166,10 @@ def test_touching_objects_are_split_after_recognition(open_world, registry, tmp_
         assert rest.status == "unknown" and "split off" in rest.events[0]  # validated with the duck
         scene.recognition.resolve_ambiguous()  # the duck's pose confirmed by a second view
         assert duck.status == "recognised"
+        if coloured:  # one cluster of two colours at first: the duck's points show its colour, the block's none
+            colour = next(m.colour for m in scene.models if m.name == "duck")
+            shares = [colour_agreement(colour, scene.recognition.cluster_colours(o.cluster)) for o in (duck, rest)]
+            assert shares[0] > 0.9 and shares[1] < 0.1, shares
         metrics = scene.metrics()
     row = next(r for r in metrics["objects"] if r["name"] == "duck")
     assert row["pose_error_mm"] < 5.0 and row["pose_error_deg"] < 2.0

@@ -5,6 +5,7 @@ object database.
 # The names other packages use (they import from the package, never from its modules).
 from explore.perception.colour import (
     COLOUR_KIND,
+    MIN_COLOUR_AGREEMENT,
     ColourSignature,
     chromaticity,
     colour_agreement,
@@ -78,6 +79,7 @@ from explore.perception.vfh import VFHRecognizer, vfh_signature
 
 __all__ = [
     "COLOUR_KIND",
+    "MIN_COLOUR_AGREEMENT",
     "ColourSignature",
     "chromaticity",
     "colour_agreement",

@@ -25,8 +25,8 @@ MIN_SHARE = 0.05
 #: chromaticity distance within which a point shows one of a model's colours: a pixel's chromaticity moves
 #: by up to ~0.02 under sensor noise and mixed edge pixels, two random colours lie ~0.2 apart (median)
 TOLERANCE = 0.05
-#: share of a cluster's bright points that must show the model's colours for the model to be a candidate
-MIN_AGREEMENT = 0.5
+#: share of the bright points a hypothesis explains that must show the model's colours
+MIN_COLOUR_AGREEMENT = 0.5
 
 #: the database descriptor kind a signature is stored under
 COLOUR_KIND = "colour"
@@ -101,4 +101,4 @@ def shows_colours_of(signature: ColourSignature | None, rgb: np.ndarray | None) 
     if signature is None or rgb is None:
         return True, float("nan")
     agreement = colour_agreement(signature, rgb)
-    return bool(np.isnan(agreement) or agreement >= MIN_AGREEMENT), agreement
+    return bool(np.isnan(agreement) or agreement >= MIN_COLOUR_AGREEMENT), agreement

@@ -5,7 +5,7 @@ Kriegel's rotation error = angle of R_est R_gt^T; for a robot whose views were c
 pose graph also the error in the robot's map, without its remaining localisation error) or
 modelled (coverage c_a of the modelled surface against the object's observable surface), and
 after how many views. Per scene: all explained, views, time, travel; the recogniser's wrong
-matches and where they were rejected (q_h threshold or PVS votes); precision and recall of the
+matches and where they were rejected (q_h threshold, colour or PVS votes); precision and recall of the
 recognitions.
 
 The true pose of a database model in the current world comes from its first recorded
@@ -127,7 +127,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
     found = session.candidates()
     owner = {o.id: _body_of(_true_points(session, o.cluster), sim) for o in found}
     rows = []
-    wrong = {"proposed": 0, "rejected_q_h": 0, "rejected_pvs": 0, "accepted": 0}
+    wrong = {"proposed": 0, "rejected_q_h": 0, "rejected_colour": 0, "rejected_pvs": 0, "accepted": 0}
     correct_recognitions = recognitions = 0
     for body in sim.objects():
         mine = [o for o in found if owner[o.id][0] == body.name]
@@ -179,6 +179,8 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 by = stopped.get((h.model, round(float(h.q_h), 9)))
                 if by == "q_h":
                     wrong["rejected_q_h"] += 1
+                elif by == "colour":
+                    wrong["rejected_colour"] += 1
                 elif by == "pvs":
                     wrong["rejected_pvs"] += 1
                 elif obj.status == "recognised" and obj.model == h.model:

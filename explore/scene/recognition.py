@@ -15,11 +15,11 @@ import numpy as np
 from explore.core import Pose, pose_error, reaches
 from explore.perception import (
     ACCEPT_FROM,
+    MIN_COLOUR_AGREEMENT,
     Q_H_MIN,
     Cluster,
     FusedPose,
     Hypothesis,
-    Model,
     ModelCloud,
     distance_to_model,
     fuse_poses,
@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from explore.sim import TriMesh
 
 EXPLAINED_FLOOR = 0.005  # m: never closer than this to the model (a noisy view's own spread)
+COLOUR_NEAR = 0.01  # m: the points a hypothesis explains, whose colours must be the model's
 FROM_VIEWS = "views"  # the method of a hypothesis made from a pose single views confirmed
 
 
@@ -95,29 +96,24 @@ class Recognition:
             out[mine] = scan.colors[cluster.beams[mine]]
         return out
 
-    def colour_candidates(self, obj: SceneObject, cluster: Cluster, models: Sequence[Model]) -> list[Model]:
-        """The models whose stored colours the cluster shows (all of them without colour on either side): a
-        shape twin of another colour is no candidate (room40's red and cyan blocks of one size)."""
-        colours = self.cluster_colours(cluster)
+    def colour_check(self, cluster: Cluster, hypothesis: Hypothesis) -> tuple[bool, float]:
+        """Whether the cluster's points the hypothesis explains (within ``COLOUR_NEAR`` of the model at its
+        pose) show the model's stored colours, and the share that does (NaN: nothing to compare). Only the
+        explained points count, so a known object touching one of another colour keeps its match, while a
+        shape twin of another colour (room40's red and cyan blocks of one size) is refused."""
+        model = next(m for m in self.scene.models if m.name == hypothesis.model)
+        colours = self.cluster_colours(cluster) if model.colour is not None else None
         if colours is None:
-            return list(models)
-        kept = []
-        for model in models:
-            fits, agreement = shows_colours_of(model.colour, colours)
-            if fits:
-                kept.append(model)
-            elif (note := f"{model.name} ruled out by colour ({agreement:.2f} of its points show its colours)") \
-                    not in obj.events:
-                obj.note(note)
-        return kept
+            return True, math.nan
+        near = distance_to_model(model.mesh, hypothesis.pose, cluster.points) <= COLOUR_NEAR
+        return shows_colours_of(model.colour, colours[near])
 
     def recognise(self, obj: SceneObject) -> list[Hypothesis]:
-        """Hypotheses for the object's cluster (its best-covered views) from every database model whose
-        colours it shows."""
+        """Hypotheses for the object's cluster (its best-covered views) from every database model."""
         scene = self.scene
         start = time.perf_counter()
+        models = scene.models
         cluster = self.recognition_cluster(obj)
-        models = self.colour_candidates(obj, cluster, scene.models)
         scans = scene.viewing.scans(cluster.view_ids)
         obj.hypotheses = scene.recognizer.recognize(cluster, models, scans) if models else []
         scene.timed("recognise_s", start)
@@ -190,13 +186,20 @@ class Recognition:
         return obj.status
 
     def _screened(self, obj: SceneObject, hypotheses: Sequence[Hypothesis]) -> list[Hypothesis]:
-        """The hypotheses that pass q_h (Eq. 3.10) and the PVS votes (Eq. 3.11), best q_h first (equal q_h
-        in the recogniser's order); the others are noted in ``obj.rejected`` with their margins."""
+        """The hypotheses that pass q_h (Eq. 3.10), colour (:meth:`colour_check`) and the PVS votes (Eq. 3.11),
+        best q_h first (equal q_h in the recogniser's order); the others are noted in ``obj.rejected`` with
+        their margins."""
         passed = {id(h) for h in self.scene.recognizer.accept(hypotheses)}
+        cluster = self.recognition_cluster(obj)
         survivors = []
         for h in sorted(hypotheses, key=lambda h: -(h.q_h if math.isfinite(h.q_h) else -1.0)):
             if id(h) not in passed:
                 obj.rejected.append({"model": h.model, "q_h": h.q_h, "by": "q_h", "margin": h.q_h - self.min_q_h})
+                continue
+            fits, agreement = self.colour_check(cluster, h)
+            if not fits:
+                obj.rejected.append({"model": h.model, "q_h": h.q_h, "by": "colour", "colour": agreement,
+                                     "margin": agreement - MIN_COLOUR_AGREEMENT})
                 continue
             checked = self._validate_one(h)
             if checked.diagnostics["v_accepted"]:
@@ -344,8 +347,8 @@ class Recognition:
         part = obj.cluster.only_view(view)
         if len(part.points) < 10:
             return None
-        models = self.colour_candidates(obj, part, [m for m in scene.models if names is None or m.name in names])
-        hypotheses = scene.recognizer.recognize(part, models, {view: scene.views[view].scan}) if models else []
+        models = [m for m in scene.models if names is None or m.name in names]
+        hypotheses = scene.recognizer.recognize(part, models, {view: scene.views[view].scan})
         why = []
         for h in scene.recognizer.accept(hypotheses):
             why.append(f"{h.model} q_h {h.q_h:.2f} fit {h.render_fit:.2f}")
@@ -354,6 +357,10 @@ class Recognition:
                 # off) confirms no pose: agreeing partial matches let a small model learned earlier
                 # claim a larger object (room40: a jenga block at q_h 0.13-0.22); nor does a model
                 # with surface where the view saw none (see SceneSettings.view_render_fit)
+                continue
+            fits, agreement = self.colour_check(part, h)
+            if not fits:
+                why[-1] += f" colour {agreement:.2f}"
                 continue
             checked = self._validate_one(h)
             why[-1] += f" v_h {checked.diagnostics['v_h']:.2f}"
