@@ -13,6 +13,7 @@ from explore.perception import (
     chromaticity,
     colour_agreement,
     colour_signature,
+    material_signature,
     shows_colours_of,
 )
 
@@ -59,6 +60,12 @@ def test_a_signature_holds_each_colour_with_its_share(rng) -> None:
     np.testing.assert_allclose(ColourSignature.from_array(signature.as_array()).as_array(), signature.as_array())
     assert colour_signature(np.zeros((500, 3))) is None  # all too dark
     assert colour_signature(_pixels(RED, 20, rng)) is None  # too few
+
+
+def test_a_material_colour_is_one_colour_unless_too_dark() -> None:
+    signature = material_signature(np.array([0.46, 0.19, 0.21]))
+    np.testing.assert_allclose(signature.as_array(), [[0.46 / 0.86, 0.19 / 0.86, 1.0]])
+    assert material_signature(np.array([0.05, 0.05, 0.05])) is None  # r + g + b = 38 of 765
 
 
 def test_a_cluster_shows_a_models_colours_or_not(rng) -> None:

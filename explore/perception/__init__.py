@@ -10,6 +10,7 @@ from explore.perception.colour import (
     chromaticity,
     colour_agreement,
     colour_signature,
+    material_signature,
     shows_colours_of,
 )
 from explore.perception.contracts import (
@@ -84,6 +85,7 @@ __all__ = [
     "chromaticity",
     "colour_agreement",
     "colour_signature",
+    "material_signature",
     "shows_colours_of",
     "PlanarSurface",
     "icp_refine",

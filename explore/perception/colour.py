@@ -84,6 +84,13 @@ def colour_signature(rgb: np.ndarray) -> ColourSignature | None:
     return ColourSignature(np.array([chroma[of_point == c].mean(axis=0) for c in kept]), shares[kept])
 
 
+def material_signature(rgb: np.ndarray) -> ColourSignature | None:
+    """The signature of a surface of one material colour (3,) in [0, 1] (a given model's); None when the colour
+    is too dark for its chromaticity to mean anything."""
+    chroma = chromaticity(255.0 * np.asarray(rgb, dtype=float)[:3])
+    return ColourSignature(chroma, np.ones(1)) if len(chroma) else None
+
+
 def colour_agreement(signature: ColourSignature, rgb: np.ndarray) -> float:
     """Share of the bright pixels (n, 3) within ``TOLERANCE`` of one of the signature's colours; NaN when too
     few pixels are bright to say."""

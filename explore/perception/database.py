@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import BadInput, Pose, brief, check_path_name
-from explore.perception.colour import COLOUR_KIND, ColourSignature, chromaticity
+from explore.perception.colour import COLOUR_KIND, material_signature
 from explore.perception.database_files import (
     APPLICATION_ID,
     BUSY_TIMEOUT_S,
@@ -419,8 +419,8 @@ class ObjectDatabase:
                 continue
             world_T_model, mesh = object_frame(body)
             rgb = sim.body_colour(body)
-            colour = {} if rgb is None else {COLOUR_KIND: ColourSignature(chromaticity(255.0 * rgb), np.ones(1))
-                                             .as_array()}
+            signature = None if rgb is None else material_signature(rgb)
+            colour = {} if signature is None else {COLOUR_KIND: signature.as_array()}
             if body.name not in self and self._seed(body.name, mesh, sim.spec.name, colour):
                 self.set_location(body.name, sim.spec.name, world_T_model, np.vstack(body.mesh.bounds))
             poses[body.name] = world_T_model
