@@ -127,7 +127,8 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
     found = session.candidates()
     owner = {o.id: _body_of(_true_points(session, o.cluster), sim) for o in found}
     rows = []
-    wrong = {"proposed": 0, "rejected_q_h": 0, "rejected_colour": 0, "rejected_pvs": 0, "accepted": 0}
+    wrong = {"proposed": 0, "rejected_q_h": 0, "rejected_colour": 0, "rejected_pvs": 0, "accepted": 0,
+             "unverifiable": 0}
     correct_recognitions = recognitions = 0
     for body in sim.objects():
         mine = [o for o in found if owner[o.id][0] == body.name]
@@ -139,10 +140,11 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                        multi_views=obj.multi_views, modelling_scans=obj.modelling_scans)
             if obj.status == "recognised" and obj.model is not None:
                 truth, truth_body = truth_of(obj.model)
-                recognitions += 1
                 right = truth_body == body.name
+                known_truth = truth_body is not None  # else the model's first world cannot be loaded
+                recognitions += int(known_truth)
                 correct_recognitions += int(right)
-                row["correct_model"] = right
+                row["correct_model"] = right if known_truth else None
                 row["pose_error_mm"], row["pose_error_deg"] = _errors(obj.pose, truth if right else None)
                 if right and truth is not None and session.registered:
                     row["map_error_mm"], row["map_error_deg"] = _errors(obj.pose, _in_map(session, obj, truth))
@@ -150,7 +152,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 if mesh is not None and obj.pose is not None:
                     if right and truth is not None:  # symmetric objects: where the surface is, not the frame
                         row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
-                    elif not right:  # a wrong model: how well it and the object's surface overlay, both ways
+                    elif known_truth and not right:  # a wrong model: how its surface and the object's overlay
                         row["wrong_model_fit_mm"] = 1e3 * float(max(  # (a small model fits a larger object one way)
                             surface_distances(mesh, obj.pose, np.eye(4), onto=body.mesh).mean(),
                             surface_distances(body.mesh, np.eye(4), obj.pose, onto=mesh).mean()))
@@ -173,6 +175,9 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
             accepted_before = wrong["accepted"]
             for h in obj.hypotheses:
                 _, h_body = truth_of(h.model)
+                if h_body is None:  # no way to tell right from wrong
+                    wrong["unverifiable"] += 1
+                    continue
                 if h_body == body.name:
                     continue
                 wrong["proposed"] += 1
