@@ -24,7 +24,7 @@ environment:
   - {name: table, source: table/table.urdf, position: [0.0, 0.0, 0.3125]}
 objects:
   - {name: red_block, source: random_urdfs/626/626.obj, size: 0.1, position: [-0.2, -0.05], on_top_of: table,
-     color: [0.46, 0.19, 0.21, 1.0], known: true}
+     color: [0.46, 0.19, 0.21], known: true}
   - {name: mug, source: objects/mug.urdf, size: 0.1, position: [0.0, 0.1], on_top_of: table, known: true}
   - {name: teddy, source: teddy_vhacd.urdf, size: 0.12, rpy_deg: [90, 0, 0], position: [0.2, -0.05],
      on_top_of: table, known: true}
@@ -86,8 +86,9 @@ def test_a_cluster_shows_a_models_colours_or_not(rng) -> None:
 
 
 def test_a_given_model_carries_the_colour_the_camera_sees(open_world, tmp_path, rng) -> None:
-    """The colour stored with a known object is its material's (a mesh body's world colour, a URDF's
-    rgba), and the camera's pixels of the object show it; a textured body is stored without colour."""
+    """The colour stored with a known object is its material's (a mesh body's world colour, here given as
+    RGB without alpha, a URDF's rgba), and the camera's pixels of the object show it; a textured body is
+    stored without colour."""
     world = tmp_path / "coloured.yaml"
     world.write_text(COLOURED)
     with open_world(world) as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
