@@ -86,9 +86,11 @@ class Recognition:
 
     def cluster_colours(self, cluster: Cluster) -> np.ndarray | None:
         """RGB (n, 3) of the cluster's points, from the colour images of the views they came from; None when
-        one of those views has no colour (a depth-only sensor)."""
+        one of those views has no colour (a depth-only sensor) or is not among the session's views."""
+        if not cluster.view_ids or max(cluster.view_ids) >= len(self.scene.views):
+            return None
         scans = self.scene.viewing.scans(cluster.view_ids)
-        if not scans or any(scan.colors is None for scan in scans.values()):
+        if any(scan.colors is None for scan in scans.values()):
             return None
         out = np.zeros((len(cluster.points), 3), dtype=np.uint8)
         for view, scan in scans.items():
