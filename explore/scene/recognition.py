@@ -20,6 +20,7 @@ from explore.perception import (
     Cluster,
     FusedPose,
     Hypothesis,
+    Model,
     ModelCloud,
     distance_to_model,
     fuse_poses,
@@ -103,7 +104,7 @@ class Recognition:
         pose) show the model's stored colours, and the share that does (NaN: nothing to compare). Only the
         explained points count, so a known object touching one of another colour keeps its match, while a
         shape twin of another colour (room40's red and cyan blocks of one size) is refused."""
-        model = next(m for m in self.scene.models if m.name == hypothesis.model)
+        model = self._model(hypothesis.model)
         colours = self.cluster_colours(cluster) if model.colour is not None else None
         if colours is None:
             return True, math.nan
@@ -406,8 +407,11 @@ class Recognition:
             return hypothesis
         return dataclasses.replace(hypothesis, pose=near, diagnostics={**hypothesis.diagnostics, "turned": True})
 
+    def _model(self, name: str) -> Model:
+        return next(m for m in self.scene.models if m.name == name)
+
     def _mesh(self, model: str) -> TriMesh:
-        return next(m.mesh for m in self.scene.models if m.name == model)
+        return self._model(model).mesh
 
     def _cloud(self, model: str) -> ModelCloud:
         if model not in self._clouds:
