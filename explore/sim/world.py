@@ -239,7 +239,7 @@ def _body(data: Any, file: str, prefix: str, world_dir: Path, is_object: bool) -
     if size is not None and f.has("scale"):
         raise BadInput(file, f.where("size"), "give either size or scale, not both")
     known = f.boolean("known", False) if is_object else False
-    color = tuple(f.vector("color", (3, 4), [0.7, 0.7, 0.7, 1.0]))
+    color = tuple(float(c) for c in f.vector("color", (3, 4), [0.7, 0.7, 0.7, 1.0]))
     if not all(0.0 <= c <= 1.0 for c in color):
         raise BadInput(file, f.where("color"), f"RGB(A) components lie in [0, 1], got {brief(list(color))}"
                        + (" (0-255 values? divide by 255)" if max(color) > 1.0 else ""))
