@@ -15,8 +15,8 @@ Parts (``--part``, default all but ``robots``):
   pair-counted precision (pairs of observations given the same model that are the same object).
 * ``fusion``: multi-view fusion with real per-view recogniser hypotheses: 10 views around the
   duck and the mug of ``scene_small``, the error of the fused pose after each view.
-* ``pose_graph``: a mobile base (robot plugin's noisy execution) surrounds every table of
-  ``scene_small_mobile`` (``--graph-worlds``, e.g. also ``two_tables``; several seeds):
+* ``pose_graph``: a mobile base without a localisation laser (robot plugin's noisy execution)
+  surrounds every table of ``scene_small_odometry`` (``--graph-worlds``, e.g. also ``two_tables``; several seeds):
   scan-pose error of raw odometry vs the incremental gtsam pose graph, and what
   re-integration at the corrected poses does to the PVS (share of the objects' true surface
   in voxels the PVS calls free).
@@ -344,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=2, help="seeds of the recognition, fusion and pose-graph parts")
     parser.add_argument("--views", type=int, default=3, help="views per seed and arrangement (recognition)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the scene and robot runs")
-    parser.add_argument("--graph-worlds", nargs="+", default=["scene_small_mobile"],
+    parser.add_argument("--graph-worlds", nargs="+", default=["scene_small_odometry"],
                         help="worlds of the pose-graph part (a mobile base; two_tables takes minutes per seed)")
     parser.add_argument("--profile", choices=("ideal", "kinect", "tof"),
                         help="the depth camera's profile (default: each world's own)")

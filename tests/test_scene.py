@@ -632,7 +632,7 @@ def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(open_world
 
 @pytest.mark.slow
 def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(open_world, registry, tmp_path):
-    """The mobile base's own noisy execution (Vasquez-Gomez sigmas) drifts; the incremental gtsam pose
+    """The mobile base's own noisy execution (Vasquez-Gomez sigmas) drifts without a laser; the incremental gtsam pose
     graph (Plane ICP between views, heading from the known table) halves the scan-pose error, and the
     PVS re-integrated at the corrected poses puts less of the objects' true surface into free space;
     a later correct_poses() (the patrol's register_views) does not undo it."""
@@ -640,7 +640,7 @@ def test_pose_graph_corrects_a_noisy_mobile_base_and_reintegrates(open_world, re
     from explore.perception import rebase_scan
     from explore.scene import known_tables, pose_graph_errors, surround
 
-    with open_world("scene_small_mobile") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
+    with open_world("scene_small_odometry") as sim, ObjectDatabase.open(tmp_path / "o.db") as db:
         scene = SceneSession(sim, registry, db, seed=0)
         scene.viewing.overview()
         surround(scene, known_tables(sim)["table"], 0.7, 1.5, 0.8)
@@ -725,23 +725,22 @@ def test_scene_exploration_with_the_mobile_manipulator(registry, tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("tree, world", [("scene_exploration", "workcell"), ("table_patrol", "scene_small_mobile")])
 def test_scene_trees_run_with_an_arm_and_a_mobile_base(registry, tmp_path, tree, world):
-    """The arm in the workcell and Görner's table patrol with the noisy mobile base: every cluster
-    ends recognised or modelled into the database, every known object is recognised within
-    5 mm / 2° (for the base: in its map, i.e. up to the pose graph's remaining localisation error).
-    Known shortfall (docs/results.md): under the Kinect profile the patrol's views of the 10 cm duck
-    from 1.3-2 m fail q_h in seed 0 (recognised in seeds 1 and 2); such an object may end modelled,
-    never matched to a wrong model, and the mug must be recognised."""
+    """The arm in the workcell and Görner's table patrol with the noisy mobile base, which re-localises
+    by its laser as it drives: every cluster ends recognised or modelled into the database, the base
+    touches nothing, every known object is recognised within 5 mm / 2° (for the base: in its map, i.e.
+    up to the pose graph's remaining localisation error). Without the laser (scene_small_odometry)
+    the base bumped into the table and learned the duck anew (docs/results.md). Known shortfall: the
+    10 cm duck, 16-21 pixels across from the mast at 1.3-2 m, is 2.5° off in seed 0's map (0.2-1.3°
+    in seeds 1-3), so the patrol's bound on it is 3°."""
     metrics, db = _explore_scene(registry, tmp_path, tree, world)
     known = [o for o in metrics["objects"] if o["known"]]
-    assert metrics["wrong_matches"]["accepted"] == 0
-    if tree == "table_patrol":
-        assert any(o["name"] == "mug" and o["result"] == "recognised" for o in known), known
-        known = [o for o in known if o["result"] == "recognised" or o["name"] != "duck"]
+    assert metrics["wrong_matches"]["accepted"] == 0 and metrics["collisions"] == 0
     for row in known:
         assert row["result"] == "recognised", row
         if "map_error_mm" in row:  # the views that recognised it are off each other by the relative error
             graph = metrics["pose_graph"]
-            assert row["map_error_mm"] < 5.0 + graph["relative_corrected_mm"] and row["map_error_deg"] < 2.0, row
+            max_deg = 3.0 if (tree, row["name"]) == ("table_patrol", "duck") else 2.0
+            assert row["map_error_mm"] < 5.0 + graph["relative_corrected_mm"] and row["map_error_deg"] < max_deg, row
             assert row["pose_error_mm"] < 5.0 + 2.0 * graph["corrected_mm"], row
         else:
             assert row["pose_error_mm"] < 5.0 and row["pose_error_deg"] < 2.0, row
