@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explore.core import Pose, pose_error, reaches
+from explore.core import Points3, Pose, pose_error, reaches, transform_points
 from explore.perception import (
     ACCEPT_FROM,
     MIN_COLOUR_AGREEMENT,
@@ -406,6 +406,13 @@ class Recognition:
         if not _agree(near, obj.pose) or not surfaces_coincide(self._mesh(obj.model), hypothesis.pose, near):
             return hypothesis
         return dataclasses.replace(hypothesis, pose=near, diagnostics={**hypothesis.diagnostics, "turned": True})
+
+    def model_surface(self, obj: SceneObject) -> Points3:
+        """The surface of a recognised object's model at its pose (3 mm samples): the space the object
+        explains, also where no view's cluster reached (empty if it has no model and pose)."""
+        if obj.model is None or obj.pose is None:
+            return np.zeros((0, 3))
+        return transform_points(obj.pose, self._cloud(obj.model).points)
 
     def _model(self, name: str) -> Model:
         return next(m for m in self.scene.models if m.name == name)

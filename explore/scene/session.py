@@ -67,6 +67,7 @@ from explore.scene.scene_objects import (
     MODELLING,
     NO_PROGRESS,
     NO_VIEW,
+    RECOGNISED,
     UNEXPLAINED,
     UNKNOWN,
     UPRIGHT_NORMAL_Z,
@@ -236,13 +237,17 @@ class SceneSession:
 
     def unexplained_surface(self) -> list[dict[str, Any]]:
         """Clusters of occupied PVS voxels (p ≥ 0.75) in the region, at least ``UNEXPLAINED_AREA`` of
-        them together, that no object's points (within ``EXPLAINED_NEAR``), the known environment, the
-        support (1 cm above its plane) or the floor explains: a surface the views saw that the
-        segmentation never made an object of (a bin floor seen as a strip left the objects on the rest
-        of it out, and the run said `success`). Largest first: voxels and centre (m)."""
+        them together, that no object's points or recognised model at its pose (within ``EXPLAINED_NEAR``),
+        the known environment, the support (1 cm above its plane) or the floor explains: a surface the
+        views saw that the segmentation never made an object of (a bin floor seen as a strip left the
+        objects on the rest of it out, and the run said `success`). A recognised object explains its
+        model's surface also where its cluster does not reach (a corner of an unseen part that the
+        clusters of a laser-localised base's views left out). Largest first: voxels and centre (m)."""
         from scipy.spatial import cKDTree
 
-        key = (len(self.views), len(self.objects), sum(len(o.cluster.points) for o in self.objects))
+        recognised = self.by_status(RECOGNISED)
+        key = (len(self.views), len(self.objects), sum(len(o.cluster.points) for o in self.objects),
+               tuple((o.model, None if o.pose is None else np.asarray(o.pose).tobytes()) for o in recognised))
         if self._unexplained is not None and self._unexplained[0] == key:
             return self._unexplained[1]
         lo, hi = np.asarray(self.sim.spec.region_min), np.asarray(self.sim.spec.region_max)
@@ -255,6 +260,7 @@ class SceneSession:
             nearest, _ = self.sim.environment_caster().closest(points)
             points = points[np.linalg.norm(nearest - points, axis=1) > ENVIRONMENT_MARGIN + 0.5 * np.sqrt(3) * voxel]
         objects = [o.cluster.points for o in self.objects if len(o.cluster.points)]
+        objects += [self.recognition.model_surface(o) for o in recognised]
         if len(points) and objects:
             distance, _ = cKDTree(np.vstack(objects)).query(points, distance_upper_bound=EXPLAINED_NEAR)
             points = points[~np.isfinite(distance)]
