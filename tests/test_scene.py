@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from contextlib import contextmanager
@@ -1092,8 +1093,6 @@ def test_a_recognised_object_explains_its_model_surface_where_its_cluster_does_n
     table under the laser-localised base a corner of a part) leaves occupied voxels that no cluster
     explains; once it is recognised, its model's surface at its pose explains them and the run is
     not called a failure for an object the segmentation missed."""
-    import dataclasses
-
     from explore.scene.metrics import model_truth
     from explore.scene.scene_objects import RECOGNISED
 
