@@ -12,15 +12,19 @@ import typer
 from explore.core import BadInput, check_output
 
 DEFAULT_OUT = Path("runs/scan.ply")
+MAX_COORDINATE = 1e6  # m; beyond it float32 ray casting has no millimetres left
 
 
 def _vector(text: str, option: str) -> np.ndarray:
     from explore.core import parse_vector
 
     try:
-        return parse_vector(text)
+        vector = parse_vector(text)
     except ValueError as error:
         raise BadInput(option, None, str(error)) from None
+    if np.abs(vector).max() > MAX_COORDINATE:
+        raise BadInput(option, text, f"a coordinate beyond ±{MAX_COORDINATE:g} m")
+    return vector
 
 
 def register(app: typer.Typer) -> None:
@@ -37,7 +41,7 @@ def register(app: typer.Typer) -> None:
         set_: Annotated[
             list[str] | None, typer.Option("--set", help="Sensor parameter key=value (repeatable).")
         ] = None,
-        sweep: Annotated[float, typer.Option("--sweep", min=0.0, help="Scan path length for line sensors [m].")] = 0.3,
+        sweep: Annotated[float, typer.Option("--sweep", min=0.0, max=10.0, help="Scan path length for line sensors [m].")] = 0.3,
         png: Annotated[Path | None, typer.Option("--png", help="Also save a picture of the scan.")] = None,
         seed: Annotated[int, typer.Option("--seed", min=0, help="Noise seed.")] = 0,
         replace: Annotated[bool, typer.Option("--replace", help="Overwrite an existing --out or --png file.")] = False,
@@ -61,6 +65,11 @@ def register(app: typer.Typer) -> None:
             params.update(parse_assignment(item) for item in (set_ or []))
             name = sensor or sim.spec.sensor.plugin
             sim.attach_plugins(reg, sensor=(name, params))
+            spec = sim.spec
+            gap = float(np.abs(eye - np.clip(eye, spec.region_min, spec.region_max)).max())
+            if gap > sim.sensor.max_range + sweep:
+                raise BadInput("--look-from", look_from, f"{gap:.3g} m from the world's region, beyond the "
+                               f"{name}'s range of {sim.sensor.max_range:g} m")
             started = time.perf_counter()
             result = sim.sensor.acquire(sim, target_for(sim.sensor, eye, target, sweep), np.random.default_rng(seed))
             elapsed = time.perf_counter() - started

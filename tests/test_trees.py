@@ -345,3 +345,15 @@ def test_tree_picture_labels_are_plain_text(tmp_path, registry) -> None:
     (legend,) = graph.get_subgraphs()  # a key of the node kinds beside the tree
     assert [n.get("label") for n in legend.get_nodes()] == ["sequence", "selector", "parallel", "decorator",
                                                               "behaviour"]
+
+
+def test_run_refuses_a_folder_holding_a_file_it_would_write(tmp_path, reg) -> None:
+    path = _write(tmp_path, "loop.yaml", LOOP)
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "model.ply").write_text("the user's own model")
+    (folder / "notes.txt").write_text("notes")
+    with pytest.raises(BadInput, match="already holds model.ply, which a run would overwrite"):
+        execute(RunConfig(tree=str(path), world="bunny_pedestal", out=folder), reg)
+    assert (folder / "model.ply").read_text() == "the user's own model"
+    assert sorted(p.name for p in folder.iterdir()) == ["model.ply", "notes.txt"]

@@ -105,17 +105,21 @@ def default_out_dir(config: RunConfig) -> Path:
 
 
 def prepare_out_dir(path: Path) -> Path:
-    """Create the run directory; never overwrite an existing run's results."""
-    if (path / "metrics.json").exists():
-        raise BadInput(str(path), None, "already holds a run (metrics.json); choose another --out")
+    """Create the run directory; never overwrite an existing run's results or a file a run would write."""
     if path.exists() and not path.is_dir():
         raise BadInput(str(path), None, "exists and is not a folder")
+    if (path / "metrics.json").exists():
+        raise BadInput(str(path), None, "already holds a run (metrics.json); choose another --out")
+    present = [name for name in RUN_FILES if (path / name).exists()]
+    if present:
+        raise BadInput(str(path), None, f"already holds {', '.join(present)}, which a run would overwrite; "
+                       "choose another --out")
     path.mkdir(parents=True, exist_ok=True)
     return path
 
 
 RUN_FILES = ("trace.jsonl", "metrics.json", "metrics.json.tmp", "tree.dot", "tree.png", "model.ply", "model.png",
-             "pvs.npz", "pvs.bt", "coverage.png")
+             "pvs.npz", "pvs.bt", "coverage.png", "run.mp4")
 
 
 def highest_missing(path: Path) -> Path | None:
