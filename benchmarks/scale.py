@@ -73,6 +73,9 @@ def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: 
     good = [o for o in known if o.get("correct_model") and o.get("map_error_mm") is not None
             and o["map_error_mm"] <= 5.0 and o["map_error_deg"] <= 2.0]
     errors = [(o["map_error_mm"], o["map_error_deg"]) for o in known if o.get("map_error_mm") is not None]
+    symmetric = [o for o in known if o.get("correct_model")  # within 5 mm / 2 deg up to the model's symmetries
+                 and o.get("symmetric_map_error_mm", math.inf) <= 5.0
+                 and o.get("symmetric_map_error_deg", math.inf) <= 2.0]
     row.update(
         status=metrics["status"], views=metrics["views"], travel_m=round(metrics["travel_m"], 1),
         collisions=metrics["collisions"],
@@ -80,6 +83,7 @@ def _row(tables: int, objects: int, robot: str, wall: float, peak: float, code: 
         missed=sum(o["result"] == "missed" for o in metrics["objects"]),
         known_recognised=f"{sum(o['result'] == 'recognised' for o in known)}/{len(known)}",
         known_within_5mm_2deg=f"{len(good)}/{len(known)}",
+        up_to_symmetry=f"{len(symmetric)}/{len(known)}",
         worst_map_error=None if not errors else [round(max(e[0] for e in errors), 1),
                                                  round(max(e[1] for e in errors), 2)],
         wrong_accepted=metrics["wrong_matches"]["accepted"],

@@ -41,7 +41,9 @@ def register(app: typer.Typer) -> None:
         set_: Annotated[
             list[str] | None, typer.Option("--set", help="Sensor parameter key=value (repeatable).")
         ] = None,
-        sweep: Annotated[float, typer.Option("--sweep", min=0.0, max=10.0, help="Scan path length for line sensors [m].")] = 0.3,
+        sweep: Annotated[
+            float, typer.Option("--sweep", min=0.0, max=10.0, help="Scan path length for line sensors [m].")
+        ] = 0.3,
         png: Annotated[Path | None, typer.Option("--png", help="Also save a picture of the scan.")] = None,
         seed: Annotated[int, typer.Option("--seed", min=0, help="Noise seed.")] = 0,
         replace: Annotated[bool, typer.Option("--replace", help="Overwrite an existing --out or --png file.")] = False,

@@ -1139,3 +1139,29 @@ def test_views_that_each_fit_part_of_a_model_do_not_recognise_an_object_seen_fro
     rows = {r["name"]: r for r in run.metrics["objects"]}
     assert run.metrics["wrong_matches"]["accepted"] == 0, rows
     assert rows["sorter"]["result"] == "modelled" and rows["duck"]["correct_model"], rows
+
+
+def test_the_pose_error_of_a_symmetric_object_is_taken_to_its_nearest_symmetric_pose() -> None:
+    """A 6 x 4 x 3 cm box turned half a turn about z is the same box; a quarter turn is not."""
+    from explore.core import pose_error
+    from explore.scene.metrics import _symmetric_errors
+    from explore.sim import box_mesh
+
+    def turn(deg: float, axis: int = 2, shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+        pose = np.eye(4)
+        c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+        i, j = [k for k in range(3) if k != axis]
+        pose[[i, i, j, j], [i, j, i, j]] = c, -s, s, c
+        pose[:3, 3] = shift
+        return pose
+
+    mesh = box_mesh(np.array([0.06, 0.04, 0.03]))
+    truth = turn(30.0, shift=(0.4, -0.1, 0.7))
+    small = turn(0.5, axis=0, shift=(0.001, 0.0, 0.0))
+    half = truth @ turn(180.0) @ small
+    assert math.degrees(pose_error(half, truth)[1]) > 179.0
+    mm, deg = _symmetric_errors(mesh, half, truth)
+    assert mm < 1.1 and deg < 0.6
+    quarter = truth @ turn(90.0) @ small
+    mm, deg = _symmetric_errors(mesh, quarter, truth)
+    assert deg > 89.0

@@ -28,6 +28,7 @@ from explore.perception import surface_distances
 
 if TYPE_CHECKING:
     from explore.scene.session import SceneSession
+    from explore.sim import TriMesh
 
 
 @lru_cache(maxsize=8)
@@ -111,6 +112,37 @@ def _errors(estimate: Pose | None, truth: Pose | None) -> tuple[float | None, fl
     return 1e3 * t_err, math.degrees(r_err)
 
 
+#: largest surface displacement (m) under which a turn of a model counts as one of its symmetries:
+#: below the depth noise of the scene sensors at their working distance, so no view tells the two apart
+SYMMETRY_TOLERANCE = 0.001
+
+
+def symmetry_of(mesh: TriMesh, turn: Pose, tolerance: float = SYMMETRY_TOLERANCE) -> Pose:
+    """The symmetry of a model nearest to ``turn`` (model frame), or the identity if it has none there.
+
+    ``turn`` is refined by ICP of the model's surface onto itself (it converges to the nearest
+    turn that maps the surface onto itself, if one is near) and kept if no surface point then
+    lies more than ``tolerance`` off the surface: BOP's maximum symmetry-aware surface distance
+    criterion for identifying symmetries (Hodaň et al., BOP Challenge 2020, Sec. 2.2).
+    """
+    from explore.mapping import sample_surface
+    from explore.perception import icp_local
+
+    points, normals = sample_surface(mesh, max(mesh.area(), 1e-12) / 3000, seed=2)
+    refined = icp_local(points, normals, points, normals, init=turn, radius=0.01, iterations=40,
+                        method="point_to_plane").transformation
+    if float(surface_distances(mesh, refined, np.eye(4)).max()) <= tolerance:
+        return refined
+    return np.eye(4)
+
+
+def _symmetric_errors(mesh: TriMesh, estimate: Pose, truth: Pose) -> tuple[float | None, float | None]:
+    """Pose error (mm, degrees) against the nearest pose the model's symmetries make equivalent to the truth."""
+    from explore.core import invert
+
+    return _errors(estimate, truth @ symmetry_of(mesh, invert(truth) @ estimate))
+
+
 def evaluate(session: SceneSession) -> dict[str, Any]:
     """metrics.json fields of a scene exploration: ``objects`` (per ground-truth object) and scene numbers."""
     from explore.mapping import GroundTruthMetrics
@@ -152,6 +184,11 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 if mesh is not None and obj.pose is not None:
                     if right and truth is not None:  # symmetric objects: where the surface is, not the frame
                         row["surface_error_mm"] = 1e3 * float(surface_distances(mesh, obj.pose, truth).mean())
+                        row["symmetric_error_mm"], row["symmetric_error_deg"] = _symmetric_errors(
+                            mesh, obj.pose, truth)
+                        if session.registered:
+                            row["symmetric_map_error_mm"], row["symmetric_map_error_deg"] = _symmetric_errors(
+                                mesh, obj.pose, _in_map(session, obj, truth))
                     elif known_truth and not right:  # a wrong model: how its surface and the object's overlay
                         row["wrong_model_fit_mm"] = 1e3 * float(max(  # (a small model fits a larger object one way)
                             surface_distances(mesh, obj.pose, np.eye(4), onto=body.mesh).mean(),
