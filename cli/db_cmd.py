@@ -84,7 +84,9 @@ def register(app: typer.Typer) -> None:
 
         if not math.isfinite(scale) or scale <= 0:
             raise BadInput("--scale", None, f"{scale} must be a positive number")
-        if not check_path_name(mesh).is_file():
+        if check_path_name(mesh).is_dir():
+            raise BadInput(str(mesh), None, "is a folder, expected a mesh file")
+        if not mesh.is_file():
             raise BadInput(str(mesh), None, "no such mesh file")
         try:
             loaded = read_mesh(mesh)
@@ -94,8 +96,9 @@ def register(app: typer.Typer) -> None:
         lo, hi = loaded.bounds
         extent = float(np.max(hi - lo))
         if not 1e-3 <= extent <= 10.0:
+            hint = "0.001 turns millimetres into metres" if extent > 10.0 else "at least 1 mm across"
             raise BadInput(str(mesh), "--scale", f"the mesh is {extent:.3g} m across with --scale {scale:g}: "
-                                                 "no object a robot models (0.001 turns millimetres into metres)")
+                                                 f"no object a robot models ({hint})")
         stored = {}
         with _open(db, create=True) as database:
             database.check_name(name)
