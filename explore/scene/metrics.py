@@ -122,8 +122,9 @@ def symmetry_of(mesh: TriMesh, turn: Pose, tolerance: float = SYMMETRY_TOLERANCE
 
     ``turn`` is refined by ICP of the model's surface onto itself (it converges to the nearest
     turn that maps the surface onto itself, if one is near) and kept if no surface point then
-    lies more than ``tolerance`` off the surface: BOP's maximum symmetry-aware surface distance
-    criterion for identifying symmetries (Hodaň et al., BOP Challenge 2020, Sec. 2.2).
+    lies more than ``tolerance`` off the surface. The error against the nearest symmetric pose is
+    what BOP's maximum symmetry-aware surface distance (MSSD; Hodaň et al., BOP Challenge 2020,
+    Sec. 2.2) measures with hand-listed symmetries; here they are found on the model itself.
     """
     from explore.mapping import sample_surface
     from explore.perception import icp_local
