@@ -61,7 +61,7 @@ def scene_world(index: int, like: str | None = None) -> dict[str, Any]:
     rng = np.random.default_rng(1000 + index)
     pool = [f"{i:03d}" for i in range(1000) if f"{i:03d}" not in NAMED]
     template = yaml.safe_load((ROOT / "worlds" / f"{like}.yaml").read_text()) if like else None
-    places = ([(o["position"][:2], o["on_top_of"], bool(o.get("known"))) for o in template["objects"]] if template
+    places = ([(o["position"], o["on_top_of"], bool(o.get("known"))) for o in template["objects"]] if template
               else [(list(cell), "table", k < KNOWN) for k, cell in enumerate(CELLS)])
     objects = []
     for number, (position, support, known) in zip(rng.choice(pool, len(places), replace=False), places, strict=True):

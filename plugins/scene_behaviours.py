@@ -441,7 +441,7 @@ class CheckExplained(ExploreBehaviour):
     def work(self) -> Outcome:
         scene = _scene(self)
         explained = scene.all_explained
-        done = explained or scene.budget_left <= 0 or not scene.open_objects()
+        done = scene.budget_left <= 0 or ((explained or not scene.open_objects()) and not scene.awaiting_closer_look())
         self.write("explained", explained)
         self.write("done", done)
         found = scene.candidates()

@@ -85,6 +85,7 @@ class SceneObject:
     modelling_end: str = ""  # why its modelling stopped (TARGET, SCAN_BUDGET, ...; "" before)
     closer_looks: int = 0
     closer_look_unreached: bool = False  # a closer look was wanted and no view of it could be reached
+    closer_look_offered: bool = False  # a closer-look step has seen it too small (and aimed its views at it)
     coverage_estimate: float = math.nan
     surface_points: Points3 | None = None
     recognised_after_views: int | None = None

@@ -131,6 +131,7 @@ class SceneSession:
         self.modelling_sessions: dict[int, Any] = {}
         self.added: list[str] = []
         self.budget_cuts: list[str] = []  # looks of the scene a step planned and the view budget cut short
+        self.looks_closer = False  # a closer-look step aims views at objects seen with too few points
         self.known_at_start = list(database.names())
         self.registered = self.mover.localises  # views recorded in a map frame of their own (not the truth)
         self.started = time.perf_counter()
@@ -186,6 +187,11 @@ class SceneSession:
         no view to model them could be reached (tried again only while other objects bring new views)."""
         pending = self.by_status(UNEXPLAINED, UNKNOWN, AMBIGUOUS)
         return pending if any(o.modelling_end != NO_VIEW for o in pending) else []
+
+    def awaiting_closer_look(self) -> list[SceneObject]:
+        """Objects seen with too few points after the round's closer look (a recognition or modelling
+        view glimpsed them): the next round's closer look is theirs before the scene counts as explained."""
+        return [o for o in self.too_small() if not o.closer_look_offered] if self.looks_closer else []
 
     def shortfall(self) -> tuple[str, str]:
         """(outcome, reason) when the session could not do what its goal needs for want of a reachable

@@ -177,9 +177,11 @@ class ViewTaking:
         the middle of a table) looks from up to twice the viewing distance. (glimpsed objects, views
         taken)."""
         scene = self.scene
+        scene.looks_closer = views > 0
         glimpsed = scene.too_small()
         taken = 0
         for obj in glimpsed:
+            obj.closer_look_offered = True
             while any(o is obj for o in scene.too_small()) and obj.closer_looks < views and scene.budget_left > 0:
                 obj.closer_looks += 1
                 if self.next_view(obj, "closer look", FARTHER) is None:
