@@ -102,7 +102,8 @@ def run_scene(world_path: Path, seed: int, registry: Any) -> dict[str, Any]:
         "explained": f"{metrics['objects_explained']}/{metrics['objects_total']}",
         "known_recognised": f"{len(recognised)}/{len(known)}",
         "known_within_5mm_2deg": sum(o["pose_error_mm"] <= 5.0 and o["pose_error_deg"] <= 2.0 for o in recognised),
-        "up_to_symmetry": sum(o["symmetric_error_mm"] <= 5.0 and o["symmetric_error_deg"] <= 2.0 for o in recognised),
+        "up_to_symmetry": sum(o.get("symmetric_error_mm", 99.0) <= 5.0 and o.get("symmetric_error_deg", 99.0) <= 2.0
+                              for o in recognised),
         "known_on_surface_5mm": sum(o.get("surface_error_mm", 99.0) <= 5.0 for o in recognised),
         "wrong_accepted": len(wrong),
         "wrong_same_shape": sum(o.get("wrong_model_fit_mm", 99.0) <= 5.0 for o in wrong),
