@@ -108,12 +108,11 @@ def prepare_out_dir(path: Path) -> Path:
     """Create the run directory; never overwrite an existing run's results or a file a run would write."""
     if path.exists() and not path.is_dir():
         raise BadInput(str(path), None, "exists and is not a folder")
-    if (path / "metrics.json").exists():
-        raise BadInput(str(path), None, "already holds a run (metrics.json); choose another --out")
     present = [name for name in RUN_FILES if (path / name).exists()]
     if present:
-        raise BadInput(str(path), None, f"already holds {', '.join(present)}, which a run would overwrite; "
-                       "choose another --out")
+        what = ("a run (metrics.json)" if "metrics.json" in present
+                else f"{', '.join(present)}, which a run would overwrite")
+        raise BadInput(str(path), None, f"already holds {what}; choose another --out")
     path.mkdir(parents=True, exist_ok=True)
     return path
 
