@@ -30,7 +30,7 @@ from explore.core.params import Param, parse_assignment, validate_params
 from explore.core.pictures import equal_axes, plt, save_curves_png, save_mesh_png, save_points_png
 from explore.core.plugin import Plugin
 from explore.core.typed import Array, Points3, Pose
-from explore.core.user_files import check_path_name, load_yaml, read_text
+from explore.core.user_files import OBJECT_NAME, OBJECT_NAME_RULE, check_path_name, load_yaml, read_text
 
 __all__ = [
     "Array",
@@ -42,6 +42,8 @@ __all__ = [
     "MAX_LINE",
     "MissionFailed",
     "NO_CANDIDATES",
+    "OBJECT_NAME",
+    "OBJECT_NAME_RULE",
     "Param",
     "Plugin",
     "Points3",

@@ -19,6 +19,9 @@ from explore.core.errors import BadInput
 MAX_BYTES = 8 * 2**20
 MAX_NODES = 100_000  # nodes of the document with every alias expanded
 NAME_MAX = 255  # bytes of one path component (Linux, macOS)
+# an object's name: a database key and part of file names (the database's mesh files, pictures)
+OBJECT_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}$")
+OBJECT_NAME_RULE = "up to 100 letters, digits, _ . -"
 
 
 def check_path_name(path: str | Path, option: str | None = None) -> Path:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import re
 import sqlite3
 import uuid
 from collections.abc import Iterator, Mapping
@@ -37,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import BadInput, Pose, brief, check_path_name
+from explore.core import OBJECT_NAME, OBJECT_NAME_RULE, BadInput, Pose, brief, check_path_name
 from explore.perception.colour import COLOUR_KIND, material_signature
 from explore.perception.database_files import (
     APPLICATION_ID,
@@ -56,7 +55,6 @@ if TYPE_CHECKING:
 
 PROVENANCES = ("given", "modelled")
 DEFAULT_DB = "runs/objects.db"  # beside the runs that fill it, not in whatever folder a command starts in
-_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}$")
 
 
 class NameTaken(BadInput):
@@ -458,9 +456,8 @@ def _now() -> str:
 
 
 def _check_name(path: Path, name: str) -> None:
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise BadInput(str(path), "name",
-                       f"{brief(name)} is not a valid object name (up to 100 letters, digits, _ . -)")
+    if not isinstance(name, str) or not OBJECT_NAME.match(name):
+        raise BadInput(str(path), "name", f"{brief(name)} is not a valid object name ({OBJECT_NAME_RULE})")
 
 
 def _put_descriptor(con: sqlite3.Connection, object_id: int, kind: str, array: np.ndarray,

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Array, BadInput, brief, check_path_name, load_yaml
+from explore.core import OBJECT_NAME, OBJECT_NAME_RULE, Array, BadInput, brief, check_path_name, load_yaml
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
 TOP_LEVEL_FIELDS = ("name", "description", "environment", "objects", "region", "robot", "sensor", "overview")
@@ -204,6 +204,8 @@ def resolve_source(source: str, world_dir: Path, where: str, file: str) -> Path:
 def _body(data: Any, file: str, prefix: str, world_dir: Path, is_object: bool) -> BodySpec:
     f = _Fields(data, file, prefix)
     name = f.string("name")
+    if not OBJECT_NAME.match(name):  # a known object's name becomes its database key and mesh file name
+        raise BadInput(file, f.where("name"), f"{brief(name)} is not a valid body name ({OBJECT_NAME_RULE})")
     position = f.vector("position", (2, 3))
     rpy = f.vector("rpy_deg", 3, [0.0, 0.0, 0.0])
     on = f.string("on_top_of", None) if f.has("on_top_of") else None
