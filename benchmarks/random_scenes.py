@@ -107,7 +107,8 @@ def run_scene(world_path: Path, seed: int, registry: Any) -> dict[str, Any]:
         "known_on_surface_5mm": sum(o.get("surface_error_mm", 99.0) <= 5.0 for o in recognised),
         "wrong_accepted": len(wrong),
         "wrong_same_shape": sum(o.get("wrong_model_fit_mm", 99.0) <= 5.0 for o in wrong),
-        "views": metrics["views"], "time_s": round(time.perf_counter() - started, 1),
+        "views": metrics["views"], "collisions": metrics.get("collisions", 0),
+        "time_s": round(time.perf_counter() - started, 1),
         "objects": [{k: o.get(k) for k in ("name", "known", "result", "model", "pose_error_mm", "pose_error_deg",
                                            "symmetric_error_mm", "symmetric_error_deg", "surface_error_mm",
                                            "wrong_model_fit_mm", "coverage")}
@@ -150,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rows, indent=1))
         return 0
     columns = ("scene", "status", "explained", "known_recognised", "known_within_5mm_2deg", "up_to_symmetry",
-               "known_on_surface_5mm", "wrong_accepted", "wrong_same_shape", "views", "time_s")
+               "known_on_surface_5mm", "wrong_accepted", "wrong_same_shape", "views", "collisions", "time_s")
     print("| " + " | ".join(columns) + " |")
     print("|" + " --- |" * len(columns))
     for row in rows:

@@ -111,6 +111,55 @@ def test_the_robot_surface_between_its_samples_keeps_the_clearance_from_the_pvs(
     assert verdict == "unknown"
 
 
+def test_scene_motion_passes_unknown_space_but_keeps_the_margin_from_occupied_voxels(workcell, endpoints,
+                                                                                     registry) -> None:
+    """A scene's robot moves through unknown space (its region is unseen when it starts) but keeps its
+    ``space_margin`` from occupied voxels, as modelling does: the voxel where the arm's surface lies
+    between its samples blocks the configuration (the old test, each sample's own voxel below p 0.75,
+    passed it), a voxel of the known table does not, and a scan sweep ends before the first
+    configuration that is blocked (the arm swept its camera through a modelled object in
+    ``benchmarks/random_scenes.py --like workcell``, scene 45)."""
+    from scipy.spatial import cKDTree
+
+    from explore.mapping import PVS
+    from explore.scene.motion import Mover, OccupiedClearance
+
+    robot = workcell.robot
+    a, b = endpoints
+    tip = robot.fk(b)[:3, 3]
+    pvs = PVS(tip - 0.15, tip + 0.15, 0.01)  # all unknown
+    mover = Mover(workcell, registry, noise=False)
+    mover.pvs = pvs
+    sweep = np.linspace(a, b, 10)
+    assert all(mover._problem().is_valid(q) for q in sweep)
+    box = (pvs.min_corner, pvs.max_corner)
+    dense = robot.link_points(b, within=box, spacing=0.005)
+    dense = dense[np.all((dense > pvs.min_corner + 0.02) & (dense < pvs.max_corner - 0.02), axis=1)]
+    gap, _ = cKDTree(robot.link_points(b, within=box)).query(dense)
+    ijk, _ = pvs.index(dense[np.argmax(gap)][None])  # the arm's surface farthest from its samples
+    pvs.log_odds[tuple(ijk[0])] = 5.0
+    pvs.version += 1
+    assert pvs.probability_below(robot.link_points(b, within=box), 0.75).all()  # the old test passes it
+    problem = mover._problem()
+    assert not problem.is_valid(b)
+    valid = [problem.is_valid(q) for q in sweep]
+    first = valid.index(False)
+    assert 4 <= first < 10 and not any(valid[first:])
+    target = ScanPath(robot.fk(a), robot.fk(b), 0.05)
+    shortened, kept = mover._valid_sweep(problem, target, sweep)
+    assert len(kept) == first and np.allclose(shortened.end[:3, 3], robot.fk(sweep[first - 1])[:3, 3])
+    mover.min_path_fraction = 0.95  # less of it than the shortest share still scanned: no scan
+    assert mover._valid_sweep(problem, target, sweep) is None
+
+    # a voxel on the known table's top and a point 2 cm above it
+    top = workcell.environment_caster().closest(np.array([[0.75, 0.0, 0.5]]))[0][0]
+    near_top = PVS(top - 0.05, top + 0.05, 0.005)
+    near_top.log_odds[tuple(near_top.index(top[None])[0][0])] = 5.0
+    above = top[None] + [0.0, 0.0, 0.02]
+    assert not OccupiedClearance(near_top, 0.75).is_free(above, clearance=0.03)[0]
+    assert OccupiedClearance(near_top, 0.75, workcell.environment_caster()).is_free(above, clearance=0.03)[0]
+
+
 def test_the_space_the_robot_stood_in_is_free_for_planning(workcell, endpoints) -> None:
     """Unknown space around the arm blocks the configuration it stands in until it is recorded as
     the robot's own volume; the PVS itself is unchanged and a cached motion is invalidated."""
