@@ -155,7 +155,8 @@ class Mover:
         path among furniture, benchmarks/planners.py), else ``rrt_connect`` (an arm; the mobile
         base's pan-tilt head); the free flyer moves in a straight line
     noise : execute with the robot's positioning noise
-    occupied_from : PVS probability from which a robot point counts as colliding
+    occupied_from : PVS probability from which a voxel is an obstacle (kept at the robot's ``space_margin``;
+        unknown space is passable, :class:`OccupiedClearance`)
     seed : seeds IK restarts and the execution noise
     planning_time : time limit of one motion plan (s on the planning clock,
         :mod:`explore.motion.planning_clock`); generous, so that the path simplification normally runs
