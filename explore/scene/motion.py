@@ -99,16 +99,17 @@ def _planar_params(pose: Pose) -> tuple[float, float, float]:
 
 
 class OccupiedClearance:
-    """The scene's free-space test for robot points: free unless a voxel with p >= ``occupied_from``
-    lies within the clearance (plus half a voxel diagonal) of the point. Unknown space is passable
-    in a scene, whose region is mostly unseen when the robot starts; occupied space is kept at the
-    robot's ``space_margin`` (clearance plus the gaps between its surface points), as the modelling
-    and view/state planners keep it from non-free voxels (in ``random_workcell_45`` the arm planned
-    to 4 mm from an object's occupied voxels and touched it between its points). Usable as
-    ``space_free`` (it takes a clearance and has the PVS's ``version``, so motions are cached).
-    Voxels of the known environment (within half a voxel diagonal and ``ENVIRONMENT_MARGIN`` of it)
-    are left to the collision checker, which tests that environment's meshes at the robot's clearance;
-    kept here, the table's own surface voxels held the arm 4 cm above the table."""
+    """A fixed-base arm's free-space test in a scene (:meth:`Mover._problem`): a robot point is free
+    unless a voxel with p >= ``occupied_from`` lies within the clearance plus half a voxel diagonal.
+
+    Unknown space is passable (a scene's region is mostly unseen when the robot starts); occupied
+    space is kept at the robot's ``space_margin`` (clearance plus the gaps between its surface
+    points), as modelling and view/state planning keep it from non-free voxels: in
+    ``random_workcell_45`` the arm planned to 4 mm from an object's occupied voxels and touched it
+    between its points. Voxels of the known environment (within ``ENVIRONMENT_MARGIN`` and half a
+    voxel diagonal of it) are left to the collision checker, which tests its meshes at the robot's
+    clearance; kept here, the table's own voxels held the arm 4 cm above the table. Usable as
+    ``space_free``: it takes a clearance and has the PVS's ``version``, so motions are cached."""
 
     def __init__(self, pvs: Any, occupied_from: float, environment: Any = None) -> None:
         self.pvs = pvs
