@@ -86,6 +86,13 @@ def target_start(target: Target) -> Pose:
     return target.start if isinstance(target, ScanPath) else np.asarray(target, dtype=float)
 
 
+def _ending_at(path: ScanPath, position: Array) -> ScanPath:
+    """``path`` from its start to ``position`` (the end of the part of it that can be scanned)."""
+    end = path.end.copy()
+    end[:3, 3] = position
+    return ScanPath(path.start, end, path.speed)
+
+
 def _planar(x: float, y: float, theta: float) -> Pose:
     out = np.eye(4)
     c, s = math.cos(theta), math.sin(theta)
@@ -250,9 +257,7 @@ class Mover:
             if ik.reachable < 2 or ik.fraction < self.min_path_fraction:
                 return None
             if not ik.complete:
-                end = target.end.copy()
-                end[:3, 3] = ik.poses[ik.reachable - 1][:3, 3]
-                target = ScanPath(target.start, end, target.speed)
+                target = _ending_at(target, ik.poses[ik.reachable - 1][:3, 3])
             return target, list(ik.configs)
         q = robot.ik(np.asarray(target, dtype=float), self.rng)
         return None if q is None else (target, [q])
@@ -323,12 +328,13 @@ class Mover:
             return None
         start_pose = robot.fk(start)
         collisions = self._drive(problem, plan)
+        true_start = robot.fk(robot.q)
+        travel = float(np.linalg.norm(true_start[:3, 3] - start_pose[:3, 3]))
+        self.travel_m += travel
         if collisions and isinstance(target, ScanPath):  # stopped short of the scan's start: no sweep from there
-            self.travel_m += float(np.linalg.norm(robot.fk(robot.q)[:3, 3] - start_pose[:3, 3]))
             self.collisions += collisions
             self.failed_moves += 1
             return None
-        true_start = robot.fk(robot.q)
         believed = self.believed_pose()
         true_target: Target = true_start
         if isinstance(target, ScanPath) and len(sweep) > 1:
@@ -338,8 +344,6 @@ class Mover:
             end = true_start.copy()
             end[:3, 3] = true_end[:3, 3]
             true_target = ScanPath(true_start, end, target.speed)
-        travel = float(np.linalg.norm(true_start[:3, 3] - start_pose[:3, 3]))
-        self.travel_m += travel
         self.collisions += collisions
         return Move(true_target, believed, travel, planning_s, collisions, getattr(plan, "planner", ""))
 
@@ -355,10 +359,9 @@ class Mover:
         keep = valid.index(False)
         if keep < 2 or keep < self.min_path_fraction * len(sweep):
             return None
-        end = target.end.copy()
-        end[:3, 3] = self.robot.fk(sweep[keep - 1])[:3, 3]
+        last = self.robot.fk(sweep[keep - 1])[:3, 3]
         self.robot.set_config(self.robot.q)  # fk may move the bodies
-        return ScanPath(target.start, end, target.speed), sweep[:keep]
+        return _ending_at(target, last), sweep[:keep]
 
     def _drive(self, problem: Any, plan: Any) -> int:
         """Execute ``plan`` with noise; the number of collisions.
