@@ -47,7 +47,13 @@ from explore.nbv.candidates import (
 )
 from explore.nbv.modelling_metrics import Evaluation
 from explore.nbv.modelling_planning import CandidatePlanning
-from explore.nbv.modelling_records import FALLBACK_PREFIX, ModellingResult, ScanRecord, resolve_strategy
+from explore.nbv.modelling_records import (
+    FALLBACK_PREFIX,
+    ModellingResult,
+    ScanRecord,
+    require_an_object,
+    resolve_strategy,
+)
 from explore.nbv.scan_planning import ScanMotion, ScanPlan, make_planner
 from explore.sim import Scan, ScanPath
 
@@ -111,6 +117,8 @@ class ModellingSession(Evaluation, CandidatePlanning):
                  obstacles: Sequence[tuple[Array, Array]] = (), standoff: float | None = None) -> None:
         from explore.mapping import PVS, SurfaceModel
 
+        if region is None:
+            require_an_object(sim)
         self.sim = sim
         self.registry = registry
         self.strategy = resolve_strategy(strategy, registry)

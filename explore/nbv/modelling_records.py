@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from explore.core import BadInput
 from explore.nbv.scan_planning import ScanPlan
 
 #: source prefix of candidates from the session's fallback generator ("fallback_sphere", ...)
@@ -45,6 +46,15 @@ class ModellingResult:
     reason: str
     records: list[ScanRecord]
     metrics: dict[str, Any] = field(default_factory=dict)
+
+
+def require_an_object(sim: Any) -> None:
+    """A single-object session (model_object, nbvs_mobile) models the world's objects and measures its coverage
+    on them: a world without objects is bad input for it, said before the run starts (the scene trees, which
+    look for objects, take an empty table)."""
+    if not sim.spec.objects:
+        raise BadInput(str(sim.spec.path), "objects", "no object to model: this tree models the world's objects "
+                       "(the scene trees take a world without objects)")
 
 
 def resolve_strategy(strategy: Any, registry: Any) -> Any:

@@ -49,6 +49,7 @@ from explore.motion import Capability, Execution, MotionProblem, execute_followi
 from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import PlanningContext
 from explore.nbv.expected_utility import ObstacleField
+from explore.nbv.modelling_records import require_an_object
 from explore.nbv.nbvs_report import Reporting
 from explore.nbv.nbvs_sampling import StateSampling
 from explore.nbv.nbvs_scoring import Scoring
@@ -120,6 +121,7 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         if sim.sensor.geometry != "area":  # one stripe per view: nothing to plan with
             raise BadInput(str(sim.spec.path), "sensor", f"view/state planning takes single views of an area sensor "
                            f"(a depth camera); {sim.sensor.name} sweeps a line along a scan path")
+        require_an_object(sim)
         self.sim, self.registry, self.robot, self.sensor = sim, registry, sim.robot, sim.sensor
         self.progress: Callable[[str], None] = _quiet  # what a long step is doing (a run shows it)
         self.expected, self.k = bool(expected), int(k)

@@ -273,6 +273,8 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
         raise BadInput(file, unknown[0], f"unknown field (valid: {', '.join(TOP_LEVEL_FIELDS)})")
     name = f.string("name", path.stem)
     description = f.get("description", "") or ""
+    if not isinstance(description, str):
+        raise BadInput(file, "description", f"expected text, got {brief(description)}")
     environment = tuple(
         _body(item, file, f"environment[{i}]", path.parent, False) for i, item in enumerate(_list(f, "environment"))
     )
@@ -301,7 +303,7 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
         if np.linalg.norm(overview[:3] - overview[3:]) < 1e-6:
             raise BadInput(file, "overview", "eye and target are the same point (the view has no direction)")
     f.check_unknown()
-    return WorldSpec(path, name, str(description), environment, objects, rmin, rmax, robot, sensor, overview)
+    return WorldSpec(path, name, description, environment, objects, rmin, rmax, robot, sensor, overview)
 
 
 def _list(f: _Fields, key: str) -> list:

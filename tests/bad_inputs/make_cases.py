@@ -125,9 +125,13 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "tab_indentation": ("malformed YAML", [("  - name: pedestal", "\t- name: pedestal")]),
     "binary_junk": ("not UTF-8 text", ""),
     "latin1_name": ("not UTF-8 text", ""),
+    "description_list": ("description: expected text", [("robot:", "description: [a, b]\nrobot:")]),
+    "objects_empty": ("objects: no object to model", [(
+        "objects:\n  - name: bunny\n    source: bunny.obj\n    size: 0.15\n    rpy_deg: [90, 0, 0]\n"
+        "    position: [0.0, 0.0]\n    on_top_of: pedestal\n", "objects: []\n")]),
 }
 
-RUN_ONLY = {"huge_region"}  # fine to look at (worlds show), rejected before a run
+RUN_ONLY = {"huge_region", "objects_empty"}  # fine to look at (worlds show), rejected before a run
 
 GOOD_TREE = """name: {name}
 root:
