@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from explore.core import BadInput
+from explore.core import FINISHED, BadInput
 
 RESULTS_FILE = "results.csv"
 
@@ -58,6 +58,12 @@ METRIC_COLUMNS = (
     "selection_s_per_scan",
 )
 
+
+# how a grid's run can end: on its own (metrics.json), or killed by the driver (no metrics)
+ROW_STATUSES = (*FINISHED, "crashed", "timeout")
+# the one-number metrics (a number or empty) and the per-scan lists (a JSON list of numbers)
+NUMBER_COLUMNS = tuple(c for c in METRIC_COLUMNS if not c.endswith("_per_scan"))
+LIST_COLUMNS = tuple(c for c in METRIC_COLUMNS if c.endswith("_per_scan"))
 
 # metrics that measure time (differ between machines); everything else is deterministic
 TIMING_COLUMNS = ("elapsed_s", "wall_s", "selection_s_mean", "selection_s_per_scan", "planning_time_s")

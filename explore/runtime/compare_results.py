@@ -18,8 +18,11 @@ from explore.core import FINISHED, BadInput, brief, read_text
 from explore.runtime.compare_grid import (
     GRID_FILE,
     ID_COLUMNS,
+    LIST_COLUMNS,
     METRIC_COLUMNS,
+    NUMBER_COLUMNS,
     RESULT_FILE,
+    ROW_STATUSES,
     Grid,
     RunSpec,
 )
@@ -140,7 +143,39 @@ def read_results(path: Path) -> list[dict[str, Any]]:
         raise BadInput(str(path), None, f"not a results table: {error}") from None
     if rows and ("run_id" not in rows[0] or "status" not in rows[0]):
         raise BadInput(str(path), None, "not a results table of explore compare (no run_id and status columns)")
-    return [{str(k): _parse_cell(v if isinstance(v, str) else "") for k, v in row.items()} for row in rows]
+    parsed = [{str(k): _parse_cell(v if isinstance(v, str) else "") for k, v in row.items()} for row in rows]
+    for line, row in enumerate(parsed, start=2):
+        _check_row(path, line, row)
+    return parsed
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_missing(value: Any) -> bool:
+    """A scan without a value in a per-scan list (JSON null or NaN)."""
+    return value is None or (isinstance(value, float) and math.isnan(value))
+
+
+def _check_row(path: Path, line: int, row: dict[str, Any]) -> None:
+    """A row as ``explore compare`` writes it: a run id, a status it knows, numbers where the metrics are numbers,
+    so that a hand-edited or foreign table is refused with its line, not summarised as if it were results."""
+    def bad(column: str, what: str) -> BadInput:
+        return BadInput(str(path), f"line {line}, {column}", what)
+
+    if row.get("run_id") in (None, ""):
+        raise bad("run_id", "empty")
+    if row.get("status") not in ROW_STATUSES:
+        raise bad("status", f"{brief(row.get('status'))} is not one of {', '.join(ROW_STATUSES)}")
+    for column in NUMBER_COLUMNS:
+        value = row.get(column)
+        if value is not None and not _is_number(value):
+            raise bad(column, f"expected a finite number or nothing, got {brief(value)}")
+    for column in LIST_COLUMNS:
+        value = row.get(column)
+        if value is not None and not (isinstance(value, list) and all(_is_number(v) or _is_missing(v) for v in value)):
+            raise bad(column, f"expected a JSON list of numbers or nothing, got {brief(value)}")
 
 
 def check_grid_file(out: Path, grid: Grid) -> None:

@@ -16,9 +16,7 @@ import numpy as np
 
 from explore.core import FINISHED
 from explore.runtime.compare_grid import DEFAULT
-
-STATUSES = (*FINISHED, "crashed", "timeout")
-
+from explore.runtime.compare_grid import ROW_STATUSES as STATUSES
 
 METHOD_DIMS = ("strategy", "planner", "robot")
 

@@ -249,6 +249,11 @@ def write_results() -> None:
         "binary": bytes(range(256)),
         "no_status_column": b"run_id,world\nr1,w\n",
         "bad_quotes": b'run_id,status,reason\nr1,success,"never closed\n',
+        "unknown_status": b"run_id,status\nr1,success\nr2,banana\n",
+        "empty_run_id": b"run_id,status\n,success\n",
+        "coverage_word": b"run_id,status,coverage\nr1,success,0.9\nr2,success,high\n",
+        "coverage_nan": b"run_id,status,coverage\nr1,success,nan\n",
+        "per_scan_not_list": b"run_id,status,coverage_per_scan\nr1,success,0.5\n",
     }
     for name, data in cases.items():
         (out / name).mkdir(parents=True)
