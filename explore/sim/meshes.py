@@ -34,6 +34,18 @@ class TriMesh:
         mesh.compute_vertex_normals()
         return mesh
 
+    def within(self, max_vertices: int, max_triangles: int) -> TriMesh:
+        """This mesh, or one within these sizes: duplicate vertices merged (an STL is a triangle soup), then
+        Garland-Heckbert quadric decimation (Open3D) until it fits."""
+        if len(self.vertices) <= max_vertices and len(self.triangles) <= max_triangles:
+            return self
+        mesh = self.to_open3d().remove_duplicated_vertices()
+        target = int(max_triangles)
+        while len(mesh.vertices) > max_vertices or len(mesh.triangles) > max_triangles:
+            mesh = mesh.simplify_quadric_decimation(target_number_of_triangles=target)
+            target = max(4, target // 2)
+        return TriMesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.triangles, dtype=np.int32))
+
     def triangle_areas(self) -> np.ndarray:
         """(m,) area of every triangle."""
         a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))

@@ -23,6 +23,9 @@ MIN_OBJECT_EXTENT = 1e-3  # m: the finest sensor here (the striper) samples abou
 # bodies whose surfaces cross over less than OVERLAP_TOLERANCE, or with no point deeper than
 # PENETRATION_TOLERANCE in the other, touch (a ball resting in a bowl set by hand); else they intersect
 OVERLAP_TOLERANCE = 0.005  # m
+# pybullet's createCollisionShape / createVisualShape take at most 131 072 vertices and 524 288 indices
+# (B3_MAX_NUM_VERTICES / B3_MAX_NUM_INDICES of the wheel, measured); a larger mesh is reduced for pybullet
+PYBULLET_MAX_VERTICES, PYBULLET_MAX_TRIANGLES = 131_072, 524_288 // 3
 PENETRATION_TOLERANCE = 0.002  # m
 
 
@@ -265,6 +268,10 @@ class Simulation:
         return TriMesh(mesh.vertices * scale, mesh.triangles)
 
     def _create_mesh_body(self, mesh: TriMesh, color: tuple[float, ...]) -> int:
+        """A static pybullet body of ``mesh`` (its collisions and colour render). A mesh beyond pybullet's size
+        limits is reduced for it (:meth:`TriMesh.within`); the ground truth and the sensors' ray casting keep
+        the full mesh."""
+        mesh = mesh.within(PYBULLET_MAX_VERTICES, PYBULLET_MAX_TRIANGLES)
         vertices = mesh.vertices.tolist()
         indices = mesh.triangles.reshape(-1).tolist()
         collision = p.createCollisionShape(
