@@ -153,8 +153,9 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
     robot = config.robot or spec.robot.plugin or registry.default("robot", "world")[0]
     where = ("--robot", None) if config.robot else (str(spec.path), "robot.plugin")
     planner = config.planner or registry.planner_for(registry.get("robot", robot, *where).factory)
+    tree_strategy = None if config.strategy else _tree_strategy(tree_file, overrides, registry)
     chosen = {
-        "strategy": config.strategy,
+        "strategy": config.strategy or (tree_strategy[0] if tree_strategy else None),
         "motion_planner": planner,
         "robot": robot,
         "sensor": config.sensor or spec.sensor.plugin,
@@ -168,6 +169,8 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
             continue
         if given[kind] is not None or kind == "motion_planner":
             info = registry.get(kind, name, options[kind], None)
+        elif kind == "strategy" and tree_strategy:  # the tree's choice
+            info = registry.get(kind, name, *tree_strategy[1:])
         else:  # the world's choice
             info = registry.get(kind, name, str(spec.path), f"{prefixes[kind]}.plugin")
         scoped = config.scoped(prefixes[kind])
@@ -209,6 +212,24 @@ def _check_grid_size(config: RunConfig, tree_file: Any, overrides: dict[str, dic
                 "pvs_layout", node.params.get("pvs_layout", layout.default)) != "dense":
             return
     check_grid(spec.region_min, spec.region_max, resolution, source, field_)
+
+
+def _tree_strategy(tree_file: Any, overrides: dict[str, dict[str, Any]], registry: Any) -> tuple[str, str, str] | None:
+    """The strategy a run of the tree uses without ``--strategy``: the ``strategy`` parameter of the first of its
+    behaviours that declares one (from ``--set``, the tree file or its default), with where it was given (source,
+    field); None if no behaviour declares one."""
+    for node in tree_file.root.walk():
+        if not node.behaviour:
+            continue
+        declared = {p.name: p for p in registry.get("behaviour", node.behaviour).params}
+        if "strategy" not in declared:
+            continue
+        if overrides.get(node.behaviour, {}).get("strategy"):
+            return str(overrides[node.behaviour]["strategy"]), "--set", f"{node.behaviour}.strategy"
+        if node.params.get("strategy"):
+            return str(node.params["strategy"]), str(tree_file.path), f"{node.behaviour}.params.strategy"
+        return str(declared["strategy"].default), str(tree_file.path), f"{node.behaviour}.strategy (its default)"
+    return None
 
 
 def _behaviour_overrides(config: RunConfig, tree_file: Any, registry: Any) -> dict[str, dict[str, Any]]:
