@@ -1,4 +1,4 @@
-"""``explore compare``: the product of runs over worlds, strategies, planners, robots and seeds.
+"""``explore compare``: the product of runs over worlds, strategies, planners, robots, settings variants and seeds.
 
 Every name is checked before the first run starts (one line, exit code 2 when wrong).
 ``explore compare --plot-only DIR`` redraws the report from ``DIR/results.csv``.
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -36,6 +37,23 @@ def _check_plugins(registry: Any, kind: str, names: list[str | None], option: st
             registry.get(kind, name, option)
 
 
+def parse_variants(items: list[str]) -> dict[str, dict[str, Any]]:
+    """``NAME: key=value; key=value`` per ``--variant`` (no settings: the grid's own): named sets of settings that
+    a grid compares like strategies (e.g. Vasquez-Gomez's DU without noise, DU-MU and EU-MU)."""
+    from explore.core import parse_assignment
+
+    variants: dict[str, dict[str, Any]] = {}
+    for item in items:
+        name, colon, body = item.partition(":")
+        name = name.strip()
+        if not colon or not re.fullmatch(r"[A-Za-z0-9._+-]+", name):
+            raise BadInput("--variant", item, "expected NAME: key=value; key=value (NAME: letters, digits, . _ + -)")
+        if name in variants:
+            raise BadInput("--variant", item, f"the variant {name!r} is given twice")
+        variants[name] = dict(parse_assignment(part.strip(), "--variant") for part in body.split(";") if part.strip())
+    return variants
+
+
 def build_grid(
     tree: str | None,
     worlds: str | None,
@@ -49,6 +67,7 @@ def build_grid(
     plugins: list[str],
     threads: int,
     videos: bool = False,
+    variants: list[str] | None = None,
 ) -> tuple[Any, Any]:
     """Validate every argument against the registry and the search paths; return (grid, registry)."""
     from explore.runtime import Grid, RunConfig, check_inputs, find_tree, load_tree, make_registry
@@ -84,19 +103,29 @@ def build_grid(
     _check_plugins(registry, "strategy", strategy_names, "--strategies")
     _check_plugins(registry, "motion_planner", planner_names, "--planners")
     _check_plugins(registry, "robot", robot_names, "--robots")
-    runs = len(world_names) * len(strategy_names) * len(planner_names) * len(robot_names) * len(seed_list)
+    named = parse_variants(variants or [])
+    runs = (len(world_names) * len(strategy_names) * len(planner_names) * len(robot_names) * max(1, len(named))
+            * len(seed_list))
     if runs > Grid.MAX_RUNS:
         raise BadInput("explore compare", None, f"the grid has {runs} runs, more than {Grid.MAX_RUNS}; "
                                                 "split it into several comparisons")
     parsed_settings = RunConfig.parse_settings(settings)
-    for world in resolved_worlds:  # every --set key and value, as each run will check them
-        for strategy, planner, robot in itertools.product(strategy_names, planner_names, robot_names):
-            check_inputs(RunConfig(tree=str(tree_path), world=world, strategy=strategy, planner=planner, robot=robot,
-                                   max_scans=max_scans, settings=parsed_settings), registry)
+    for world in resolved_worlds:  # every --set and --variant key and value, as each run will check them
+        for strategy, planner, robot, (name, extra) in itertools.product(
+                strategy_names, planner_names, robot_names, list(named.items()) or [("", {})]):
+            try:
+                check_inputs(RunConfig(tree=str(tree_path), world=world, strategy=strategy, planner=planner,
+                                       robot=robot, max_scans=max_scans, settings={**parsed_settings, **extra}),
+                             registry)
+            except BadInput as error:  # a variant's own setting: say which variant
+                if error.source == "--set" and any(str(error.field).startswith(key) for key in extra):
+                    raise BadInput(f"--variant {name}", error.field, error.message) from None
+                raise
     grid = Grid(
         tree=str(tree_path.resolve()), worlds=resolved_worlds, strategies=strategy_names, planners=planner_names,
         robots=robot_names, seeds=seed_list, max_scans=max_scans,
         settings=parsed_settings, timeout=timeout, plugins=plugin_specs, threads=threads, videos=videos,
+        variants=named,
     )
     return grid, registry
 
@@ -162,6 +191,9 @@ def register(app: typer.Typer) -> None:
         timeout: Annotated[float, typer.Option("--timeout", help="Seconds before a run is ended (timeout).")] = 1800.0,
         threads: Annotated[int, typer.Option("--threads", help="Numeric threads per run.")] = 1,
         set_: Annotated[list[str] | None, typer.Option("--set", help="key=value for every run (repeatable).")] = None,
+        variant: Annotated[list[str] | None, typer.Option(
+            "--variant", help="A named set of settings compared like a strategy: 'NAME: key=value; key=value' "
+            "(repeatable; each over --set).")] = None,
         plugin: Annotated[
             list[str] | None, typer.Option("--plugin", help="Extra plugin object FILE.py:OBJ or MODULE:OBJ.")
         ] = None,
@@ -185,7 +217,7 @@ def register(app: typer.Typer) -> None:
             return 0
         grid, registry = build_grid(
             tree, worlds, strategies, planners, robots, seeds, max_scans, set_ or [], timeout, plugin or [], threads,
-            video,
+            video, variant or [],
         )
         if out is None:
             raise BadInput("--out", None, "missing (the results folder)")

@@ -600,6 +600,31 @@ overview: {eye: [0.0, -0.8, 1.3], target: [0.0, 0.0, 0.65]}
 """
 
 
+def test_variants_are_named_settings_compared_like_strategies(tmp_path) -> None:
+    """``--variant NAME: key=value; ...`` adds a dimension of named settings (Vasquez-Gomez's DU without noise
+    beside DU-MU, a coarse beside a fine PVS): each variant's runs carry its settings over --set, its name in the
+    run id and the variant column, and a row of their own in the summary's tables."""
+    out = tmp_path / "variants"
+    args = [str(EXPLORE), "compare", "--tree", "model_object", "--worlds", "bunny_pedestal", "--seeds", "1",
+            "--max-scans", "2", "--jobs", "2", "--set", "strategy.termination_params={n_abort: 20}",
+            "--variant", "coarse: resolution=0.01; start_modelling.noise=false", "--variant", "fine:",
+            "--out", str(out)]
+    done = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = {r["variant"]: r for r in csv_rows(out)}
+    assert set(rows) == {"coarse", "fine"}
+    for name, row in rows.items():
+        assert row["run_id"] == f"bunny_pedestal__default__default__default__{name}__seed000"
+        metrics = json.loads((out / "runs" / row["run_id"] / "metrics.json").read_text())
+        assert row["coverage"] == pytest.approx(metrics["coverage"]) and row["scans"] == 2
+        given = {"strategy.termination_params": {"n_abort": 20}}
+        if name == "coarse":
+            given |= {"resolution": 0.01, "start_modelling.noise": False}
+        assert metrics["settings"] == given
+    summary = json.loads((out / "summary.json").read_text())
+    assert [row["method"] for row in summary["vasquez"]["rows"]] == ["coarse", "fine"]
+
+
 def test_scene_runs_of_a_grid_each_have_their_own_database(tmp_path, monkeypatch) -> None:
     """Two seeds of a scene tree at once: each run seeds and fills an object database in its own folder.
     They used to share the user's default ``runs/objects.db`` (in the folder compare was started from):

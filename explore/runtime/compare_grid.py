@@ -37,7 +37,7 @@ LOG_FILE = "run.log"
 DEFAULT = "default"  # column value when the tree's / world's default is used
 
 
-ID_COLUMNS = ("run_id", "world", "strategy", "planner", "robot", "seed", "status", "reason")
+ID_COLUMNS = ("run_id", "world", "strategy", "planner", "robot", "variant", "seed", "status", "reason")
 
 
 METRIC_COLUMNS = (
@@ -98,6 +98,7 @@ class RunSpec:
     plugins: tuple[str, ...] = ()
     threads: int = 1
     video: bool = False  # also write run.mp4 (changes no result)
+    variant: str | None = None  # the name of the grid's settings variant (its settings are in ``settings``)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -119,6 +120,7 @@ class RunSpec:
             "strategy": self.strategy or DEFAULT,
             "planner": self.planner or DEFAULT,
             "robot": self.robot or DEFAULT,
+            "variant": self.variant or DEFAULT,
             "seed": self.seed,
         }
 
@@ -139,19 +141,24 @@ class Grid:
     plugins: list[str] = field(default_factory=list)
     threads: int = 1
     videos: bool = False  # one video per method: its first seed's run.mp4 (changes no result)
+    # named sets of settings compared as one more dimension (``--variant "DU: start_nbvs.noise=false"``), each
+    # applied over ``settings``; none: one unnamed variant, and run ids without a variant part
+    variants: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     MAX_RUNS = 100_000  # ~35 days of 30 s runs on 2 cores: a larger grid is a typo, not a plan
     # fields that change what a run computes: a results folder holds one value of each
-    DEFINING = ("tree", "max_scans", "settings", "plugins", "threads")
+    DEFINING = ("tree", "max_scans", "settings", "plugins", "threads", "variants")
 
     def runs(self, out: Path) -> list[RunSpec]:
-        """Every run, in grid order (world, strategy, planner, robot, seed)."""
+        """Every run, in grid order (world, strategy, planner, robot, variant, seed)."""
         specs: list[RunSpec] = []
         seen: dict[str, tuple] = {}
-        product = itertools.product(self.worlds, self.strategies, self.planners, self.robots, self.seeds)
-        for world, strategy, planner, robot, seed in product:
-            key = (world, strategy, planner, robot, seed)
-            run_id = "__".join([slug(world), slug(strategy), slug(planner), slug(robot), f"seed{seed:03d}"])
+        variants: list[str | None] = list(self.variants) or [None]
+        product = itertools.product(self.worlds, self.strategies, self.planners, self.robots, variants, self.seeds)
+        for world, strategy, planner, robot, variant, seed in product:
+            key = (world, strategy, planner, robot, variant, seed)
+            named = [slug(variant)] if variant is not None else []
+            run_id = "__".join([slug(world), slug(strategy), slug(planner), slug(robot), *named, f"seed{seed:03d}"])
             if run_id in seen:
                 raise BadInput("explore compare", None, f"runs {seen[run_id]} and {key} share the id {run_id}")
             seen[run_id] = key
@@ -159,9 +166,9 @@ class Grid:
                 RunSpec(
                     run_id=run_id, tree=self.tree, world=world, strategy=strategy, planner=planner,
                     robot=robot, seed=seed, out_dir=str((out / RUNS_DIR / run_id).resolve()),
-                    max_scans=self.max_scans, settings=dict(self.settings), timeout=self.timeout,
-                    plugins=tuple(self.plugins), threads=self.threads,
-                    video=self.videos and seed == self.seeds[0],
+                    max_scans=self.max_scans, settings={**self.settings, **self.variants.get(variant or "", {})},
+                    timeout=self.timeout, plugins=tuple(self.plugins), threads=self.threads,
+                    video=self.videos and seed == self.seeds[0], variant=variant,
                 )
             )
         return specs

@@ -18,7 +18,7 @@ from explore.core import FINISHED
 from explore.runtime.compare_grid import DEFAULT
 from explore.runtime.compare_grid import ROW_STATUSES as STATUSES
 
-METHOD_DIMS = ("strategy", "planner", "robot")
+METHOD_DIMS = ("strategy", "planner", "robot", "variant")
 
 
 NOTCH_FACTOR = 1.57
