@@ -9,6 +9,7 @@ and the hand-over to ``explore compare`` live here. Arguments after ``--`` go to
 from __future__ import annotations
 
 import argparse
+import shlex
 from collections.abc import Sequence
 
 
@@ -27,15 +28,20 @@ def parser(doc: str, full_help: str) -> argparse.ArgumentParser:
 
 def compare_command(args: argparse.Namespace, extra: Sequence[str], *, tree: str, worlds: Sequence[str],
                     strategies: Sequence[str], seeds: int, max_scans: int, out: str,
-                    planners: Sequence[str] = (), timeout: int = 3600) -> list[str]:
-    """The ``explore compare`` arguments of a grid (``args.seeds`` overrides ``seeds``)."""
+                    planners: Sequence[str] = (), timeout: int = 3600, variants: Sequence[str] = ()) -> list[str]:
+    """The ``explore compare`` arguments of a grid (``args.seeds`` overrides ``seeds``); ``variants`` are
+    ``--variant`` values (``NAME: key=value; ...``)."""
     command = [
-        "compare", "--tree", tree, "--worlds", ",".join(worlds), "--strategies", ",".join(strategies),
+        "compare", "--tree", tree, "--worlds", ",".join(worlds),
         "--seeds", str(args.seeds or seeds), "--max-scans", str(max_scans), "--jobs", str(args.jobs),
         "--executor", args.executor, "--timeout", str(timeout), "--out", args.out or out,
     ]
+    if strategies:
+        command += ["--strategies", ",".join(strategies)]
     if planners:
         command += ["--planners", ",".join(planners)]
+    for variant in variants:
+        command += ["--variant", variant]
     if args.ray_address:
         command += ["--ray-address", args.ray_address]
     return command + [a for a in extra if a != "--"]
@@ -43,7 +49,7 @@ def compare_command(args: argparse.Namespace, extra: Sequence[str], *, tree: str
 
 def run(command: list[str], dry_run: bool = False) -> int:
     """Print the command, then run it in this process (unless ``dry_run``); its exit code."""
-    print("explore " + " ".join(command))
+    print("explore " + shlex.join(command))
     if dry_run:
         return 0
     from explore_cli.main import main as explore

@@ -1,20 +1,20 @@
-"""Vasquez-Gomez et al. Table 5: deterministic (DU) vs expected utility (EU) under positioning noise.
+"""Vasquez-Gomez et al. Tables 5 and 6: deterministic (DU) vs expected utility (EU) under positioning noise.
 
-Runs ``explore compare`` with the view/state tree ``trees/nbvs_mobile.yaml`` and the
-``vasquez/du`` and ``vasquez/eu`` strategies on the bunny among furniture (``cluttered``, a
-mobile manipulator whose velocity controls carry the paper's truncated Gaussian noise,
-sigma_v 1.65 mm/s, sigma_omega 0.28 rad/s: the robot's defaults). A collision ends a run (a
-failed mission in the report), as in the paper. summary.md then holds coverage and
-failures per strategy; ``benchmarks/planners.py --part nbvs`` prints the Table 5 layout
-(collision rate per k) from the same library code without the tree.
+Runs ``explore compare`` with the view/state tree ``trees/nbvs_mobile.yaml`` and the paper's three
+approaches as ``--variant``s of one grid: DU without noise (``start_nbvs.noise=false``), DU-MU
+(``vasquez/du`` executed with noise) and EU-MU (``vasquez/eu``, k = 500 rollouts), on a mobile
+manipulator whose velocity controls carry the paper's truncated Gaussian noise (sigma_v 1.65 mm/s,
+sigma_omega 0.28 rad/s: the robot's defaults). A collision ends a run (a failed mission in the report),
+as in the paper; summary.md holds the Table 5 layout (mean / max coverage, collision rate) per variant.
 
-Quick (default): 3 seeds, 6 views. ``--full``: 10 seeds (as in the paper), 12 views. EU uses
-the strategy's k = 100 (``--strategies`` lists the strategies; ``benchmarks/planners.py
---part nbvs --ks 1,100,500`` sweeps k). Extra arguments after ``--`` go to ``explore
-compare``; re-running the same command resumes::
+Table 6 (default): the bunny among furniture (``cluttered``), DU-MU and EU-MU. ``--table5``: the
+object alone on a table (``bunny_table_mobile``, ``duck_table_mobile``), DU, DU-MU and EU-MU.
+Quick (default): 3 seeds, 6 views. ``--full``: 10 seeds (as in the paper), 12 views.
+``benchmarks/planners.py --part nbvs --ks 1,10,100,500 --open-loop`` sweeps k (Fig. 11). Extra
+arguments after ``--`` go to ``explore compare``; re-running the same command resumes::
 
     .venv/bin/python benchmarks/compare_vasquez.py --out runs/vasquez_quick
-    .venv/bin/python benchmarks/compare_vasquez.py --full
+    .venv/bin/python benchmarks/compare_vasquez.py --table5 --full
 """
 
 from __future__ import annotations
@@ -23,24 +23,22 @@ import sys
 
 import compare_grid
 
-WORLD = "cluttered"
-
-
-def strategies() -> list[str]:
-    """The registered Vasquez-Gomez strategies (DU first)."""
-    from explore.runtime import Registry
-
-    names = [n for n in Registry.load().names("strategy") if n.startswith("vasquez/")]
-    return sorted(names, key=lambda n: (n != "vasquez/du", n))
+DU = "DU: start_nbvs.strategy=vasquez/du; start_nbvs.noise=false"
+DU_MU = "DU-MU: start_nbvs.strategy=vasquez/du"
+EU_MU = "EU-MU: start_nbvs.strategy=vasquez/eu; strategy.k=500"
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = compare_grid.parser(__doc__, "10 seeds, 12 views")
+    parser.add_argument("--table5", action="store_true", help="the object alone on a table: DU, DU-MU, EU-MU")
     args, extra = parser.parse_known_args(argv)
+    table = "table5" if args.table5 else "table6"
     command = compare_grid.compare_command(
-        args, extra, tree="nbvs_mobile", worlds=[WORLD], strategies=strategies(),
-        seeds=10 if args.full else 3, max_scans=12 if args.full else 6, timeout=7200,
-        out=f"runs/compare_vasquez_{'full' if args.full else 'quick'}",
+        args, extra, tree="nbvs_mobile", strategies=(),
+        worlds=["bunny_table_mobile", "duck_table_mobile"] if args.table5 else ["cluttered"],
+        variants=[DU, DU_MU, EU_MU] if args.table5 else [DU_MU, EU_MU],
+        seeds=10 if args.full else 3, max_scans=13 if args.full else 7, timeout=7200,
+        out=f"runs/compare_vasquez_{table}_{'full' if args.full else 'quick'}",
     )
     return compare_grid.run(command, args.dry_run)
 
