@@ -15,8 +15,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import FINISHED
-from explore.runtime.compare_grid import DEFAULT
-from explore.runtime.compare_grid import ROW_STATUSES as STATUSES
+from explore.runtime.compare_grid import DEFAULT, ROW_STATUSES
 
 METHOD_DIMS = ("strategy", "planner", "robot", "variant")
 
@@ -252,12 +251,12 @@ def planner_table(rows: Sequence[dict[str, Any]]) -> Table:
 
 
 def status_table(rows: Sequence[dict[str, Any]]) -> Table:
-    table = Table("runs", "Runs", ["World", "Method", *STATUSES, "Mean wall time / s"])
+    table = Table("runs", "Runs", ["World", "Method", *ROW_STATUSES, "Mean wall time / s"])
     for world, method, members in groups(rows):
-        counts = {s: sum(r.get("status") == s for r in members) for s in STATUSES}
+        counts = {s: sum(r.get("status") == s for r in members) for s in ROW_STATUSES}
         wall = mean(values(members, "wall_s"))
         table.values.append({"world": world, "method": method, **counts, "wall_s": wall})
-        table.rows.append([world, method, *(str(counts[s]) for s in STATUSES), fmt(wall, 1)])
+        table.rows.append([world, method, *(str(counts[s]) for s in ROW_STATUSES), fmt(wall, 1)])
     return table
 
 
