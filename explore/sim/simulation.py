@@ -23,10 +23,10 @@ MIN_OBJECT_EXTENT = 1e-3  # m: the finest sensor here (the striper) samples abou
 # bodies whose surfaces cross over less than OVERLAP_TOLERANCE, or with no point deeper than
 # PENETRATION_TOLERANCE in the other, touch (a ball resting in a bowl set by hand); else they intersect
 OVERLAP_TOLERANCE = 0.005  # m
+PENETRATION_TOLERANCE = 0.002  # m
 # pybullet's createCollisionShape / createVisualShape take at most 131 072 vertices and 524 288 indices
 # (B3_MAX_NUM_VERTICES / B3_MAX_NUM_INDICES of the wheel, measured); a larger mesh is reduced for pybullet
 PYBULLET_MAX_VERTICES, PYBULLET_MAX_TRIANGLES = 131_072, 524_288 // 3
-PENETRATION_TOLERANCE = 0.002  # m
 
 
 @dataclass(frozen=True)
