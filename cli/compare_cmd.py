@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import re
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -41,12 +40,13 @@ def parse_variants(items: list[str]) -> dict[str, dict[str, Any]]:
     """``NAME: key=value; key=value`` per ``--variant`` (no settings: the grid's own): named sets of settings that
     a grid compares like strategies (e.g. Vasquez-Gomez's DU without noise, DU-MU and EU-MU)."""
     from explore.core import parse_assignment
+    from explore.runtime.compare_grid import slug
 
     variants: dict[str, dict[str, Any]] = {}
     for item in items:
         name, colon, body = item.partition(":")
         name = name.strip()
-        if not colon or not re.fullmatch(r"[A-Za-z0-9._+-]+", name):
+        if not colon or not name or slug(name) != name:  # the name is its run ids' folder part as it is
             raise BadInput("--variant", item, "expected NAME: key=value; key=value (NAME: letters, digits, . _ + -)")
         if name in variants:
             raise BadInput("--variant", item, f"the variant {name!r} is given twice")
