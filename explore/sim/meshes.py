@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -91,26 +92,50 @@ def sphere_mesh(radius: float, resolution: int = 24) -> TriMesh:
 
 
 def read_obj(path: Path) -> TriMesh:
-    """Read an OBJ file, fan-triangulating polygons (Open3D drops quads)."""
-    vertices: list[list[float]] = []
-    triangles: list[list[int]] = []
+    """Read an OBJ file, fan-triangulating polygons (Open3D drops quads); negative references count back from
+    the vertices read so far. Parsed by numpy a block at a time; a line it cannot read is named in the error."""
     with open(path, encoding="utf-8", errors="replace") as handle:
-        for number, line in enumerate(handle, 1):
-            try:
-                if line.startswith("v "):
-                    vertices.append([float(x) for x in line.split()[1:4]])
-                    if len(vertices[-1]) != 3:
-                        raise ValueError("a vertex needs x, y, z")
-                elif line.startswith("f "):
-                    refs = [int(token.split("/")[0]) for token in line.split()[1:]]
-            except ValueError as error:
-                raise ValueError(f"{path.name} line {number}: {error}") from None
-            if line.startswith("f "):
-                idx = [r - 1 if r > 0 else len(vertices) + r for r in refs]
-                triangles.extend([idx[0], idx[i], idx[i + 1]] for i in range(1, len(idx) - 1))
-    if not vertices or not triangles:
+        lines = handle.read().splitlines()
+    vertex_rows = [i for i, line in enumerate(lines) if line.startswith("v ")]
+    face_rows = [i for i, line in enumerate(lines) if line.startswith("f ")]
+    if not vertex_rows or not face_rows:
         raise ValueError(f"{path}: no triangles")
-    return _checked(TriMesh(np.asarray(vertices, dtype=float), np.asarray(triangles, dtype=np.int64)), path)
+    try:
+        vertices = np.loadtxt([lines[i] for i in vertex_rows], usecols=(1, 2, 3), dtype=float, comments=None, ndmin=2)
+        tokens = np.array(_OBJ_REF_TAIL.sub("", "\n".join(lines[i] for i in face_rows)).split())
+        is_marker = tokens == "f"
+        refs = tokens[~is_marker].astype(np.int64)
+    except ValueError:
+        raise ValueError(_first_bad_obj_line(path, lines)) from None
+    starts = np.flatnonzero(is_marker)
+    corners = np.diff(np.append(starts, len(tokens))) - 1  # references per face
+    first = starts - np.arange(len(starts))  # index of each face's first reference in refs
+    # a negative reference counts back from the vertices defined above its face line
+    defined = np.searchsorted(np.asarray(vertex_rows), np.asarray(face_rows))
+    refs = np.where(refs > 0, refs - 1, np.repeat(defined, corners) + refs)
+    fans = np.maximum(corners - 2, 0)  # triangles (0, i, i + 1) of each face's fan
+    face = np.repeat(np.arange(len(fans)), fans)
+    step = np.arange(len(face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1
+    triangles = np.stack([refs[first[face]], refs[first[face] + step], refs[first[face] + step + 1]], axis=1)
+    if not len(triangles):
+        raise ValueError(f"{path}: no triangles")
+    return _checked(TriMesh(vertices, triangles), path)
+
+
+_OBJ_REF_TAIL = re.compile(r"/\S*")  # the /texture/normal part of a face reference
+
+
+def _first_bad_obj_line(path: Path, lines: list[str]) -> str:
+    """The error of the first vertex or face line that is not numbers (only when numpy's block parse failed)."""
+    for number, line in enumerate(lines, 1):
+        try:
+            if line.startswith("v ") and len([float(x) for x in line.split()[1:4]]) != 3:
+                raise ValueError("a vertex needs x, y, z")
+            if line.startswith("f "):
+                [int(token.split("/")[0]) for token in line.split()[1:]]
+        except ValueError as error:
+            return f"{path.name} line {number}: {error}"
+    return f"{path.name}: not a readable OBJ file"
 
 
 def _checked(mesh: TriMesh, path: Path) -> TriMesh:
