@@ -165,6 +165,31 @@ def test_newer_schema_refused(tmp_path):
     assert path.read_bytes() == before
 
 
+@pytest.mark.parametrize("lock", ["EXCLUSIVE", "IMMEDIATE"])
+def test_a_database_locked_past_the_busy_timeout_is_said_to_be_locked_not_corrupted(tmp_path, monkeypatch, lock):
+    """Another process holding the file's lock (a run adding its models) is not a damaged file: opening and
+    writing say "locked", and the other process's data stays."""
+    from explore.perception import database, database_files
+
+    path = tmp_path / "objects.db"
+    with ObjectDatabase.open(path) as db:
+        db.add("box", _mesh())
+    monkeypatch.setattr(database, "BUSY_TIMEOUT_S", 0.2)
+    monkeypatch.setattr(database_files, "BUSY_TIMEOUT_S", 0.2)
+    holder = sqlite3.connect(path, isolation_level=None)
+    holder.execute(f"BEGIN {lock}")
+    try:
+        with pytest.raises(BadInput, match="locked by another process") as error:
+            with ObjectDatabase.open(path) as db:
+                db.add("other", _mesh())
+        assert "corrupt" not in str(error.value)
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    with ObjectDatabase.open(path, create=False) as db:
+        assert db.names() == ["box"]
+
+
 def test_cli_exit_codes(tmp_path, capsys, monkeypatch):
     from explore_cli.main import main
 

@@ -44,6 +44,8 @@ from explore.perception.database_files import (
     SCHEMA,
     SCHEMA_VERSION,
     check_identity,
+    is_locked,
+    locked,
     validate_existing,
     write_mesh_atomic,
 )
@@ -139,6 +141,8 @@ class ObjectDatabase:
                 isolation_level=None, check_same_thread=False,
             )
         except sqlite3.Error as error:
+            if is_locked(error):
+                raise locked(path) from None
             raise BadInput(str(path), None, f"cannot open the object database: {error}") from None
         db = cls(path, connection, path.with_suffix(".meshes"))
         try:
@@ -157,6 +161,8 @@ class ObjectDatabase:
             version = connection.execute("PRAGMA user_version").fetchone()[0]
             tables = {r[0] for r in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.Error as error:
+            if is_locked(error):
+                raise locked(path) from None
             raise BadInput(str(path), None, f"cannot open the object database: {error}") from None
         if version == 0 and app == 0 and not tables:
             connection.close()
@@ -190,6 +196,8 @@ class ObjectDatabase:
             con.execute("PRAGMA foreign_keys = ON")
             con.execute("PRAGMA synchronous = NORMAL")
         except sqlite3.DatabaseError as error:
+            if is_locked(error):
+                raise locked(self.path) from None
             raise BadInput(str(self.path), None, f"not an explore object database ({error})") from None
         self.mesh_dir.mkdir(parents=True, exist_ok=True)
 
@@ -197,7 +205,12 @@ class ObjectDatabase:
     def _transaction(self) -> Iterator[sqlite3.Connection]:
         """``BEGIN IMMEDIATE`` ... ``COMMIT`` (rolled back on error); waits for other writers."""
         con = self.connection
-        con.execute("BEGIN IMMEDIATE")
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as error:
+            if is_locked(error):
+                raise locked(self.path) from None
+            raise
         try:
             yield con
         except BaseException:

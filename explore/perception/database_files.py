@@ -63,6 +63,17 @@ def _foreign(path: Path, why: str) -> BadInput:
     return BadInput(str(path), None, f"not an explore object database ({why}); the file was left untouched")
 
 
+def is_locked(error: sqlite3.Error) -> bool:
+    """True for SQLite's "database is locked" / "busy": another connection held its lock past the busy timeout
+    (the file is fine)."""
+    return isinstance(error, sqlite3.OperationalError) and any(w in str(error) for w in ("locked", "busy"))
+
+
+def locked(path: Path) -> BadInput:
+    return BadInput(str(path), None, f"locked by another process for {BUSY_TIMEOUT_S:.0f} s (an explore run or "
+                    "`explore db` command writing to it?); try again when it has finished; the file was left untouched")
+
+
 def validate_existing(path: Path) -> None:
     """Refuse a file that is not an explore database, reading it through a read-only connection."""
     try:
@@ -90,7 +101,7 @@ def _check_readonly(path: Path) -> None:
     try:
         con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_S)
     except sqlite3.Error as error:
-        raise _foreign(path, str(error)) from None
+        raise (locked(path) if is_locked(error) else _foreign(path, str(error))) from None
     try:
         app = con.execute("PRAGMA application_id").fetchone()[0]
         version = con.execute("PRAGMA user_version").fetchone()[0]
@@ -102,7 +113,7 @@ def _check_readonly(path: Path) -> None:
         if check != "ok":
             raise _foreign(path, f"corrupted: {check}")
     except sqlite3.DatabaseError as error:
-        raise _foreign(path, f"corrupted: {error}") from None
+        raise (locked(path) if is_locked(error) else _foreign(path, f"corrupted: {error}")) from None
     finally:
         con.close()
 
