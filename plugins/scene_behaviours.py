@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import BUDGET, NO_CANDIDATES, SUCCESS, Param
+from explore.core import BUDGET, FAILURE, NO_CANDIDATES, SUCCESS, Param
 from explore.perception import Q_H_MIN
 from explore.runtime import ExploreBehaviour, Outcome, failure, success
 
@@ -38,17 +38,20 @@ class SceneRun:
         return self.shortfall()[1]
 
     def shortfall(self) -> tuple[str, str]:
-        """(outcome, reason): NO_CANDIDATES when none of a patrolled table's observation poses could be
-        reached, BUDGET when the view budget ran out before a table got a view (its objects are not
-        explained, however well the others went), then the session's own shortfall
-        (:meth:`~explore.scene.SceneSession.shortfall`); (SUCCESS, "") when the goal was met."""
+        """(outcome, reason): the session's FAILURE (a contact, surface no object explains) first, then
+        NO_CANDIDATES when none of a patrolled table's observation poses could be reached, BUDGET when the
+        view budget ran out before a table got a view (its objects are not explained, however well the
+        others went), then the session's other shortfalls (:meth:`~explore.scene.SceneSession.shortfall`);
+        (SUCCESS, "") when the goal was met."""
+        outcome, reason = self.session.shortfall()
+        if outcome == FAILURE:
+            return outcome, reason
         unreached, unseen = self._unseen_tables()
         if unreached:
             return NO_CANDIDATES, f"no observation pose around {', '.join(unreached)} could be reached"
         if unseen:
             max_views = self.session.settings.max_views
             return BUDGET, f"view budget of {max_views} used up before {', '.join(unseen)} got a view"
-        outcome, reason = self.session.shortfall()
         return (outcome, reason) if outcome else (SUCCESS, "")
 
     def _unseen_tables(self) -> tuple[list[str], list[str]]:

@@ -767,6 +767,23 @@ def test_a_patrol_out_of_views_before_a_table_is_seen_says_so(registry, tmp_path
     assert pvs.resolution == pytest.approx(0.005) and pvs.counts("octomap")["occupied"] > 10_000
 
 
+@pytest.mark.slow
+def test_a_patrol_that_touches_the_table_is_no_success(registry, tmp_path):
+    """The laser-less base with a strong heading noise (sigma_w 0.8 rad/s) bumps into the table: each contact
+    stops its motion and the patrol goes on, but the run ends ``failure`` naming what it touched, however many
+    objects it explained (it used to say ``success`` with the contacts only counted in the metrics)."""
+    from explore.runtime import RunConfig, execute
+
+    result = execute(RunConfig(tree="table_patrol", world="scene_small_odometry", seed=0, out=tmp_path / "run",
+                               settings={"start_scene.db": str(tmp_path / "objects.db"), "robot.sigma_w": 0.8}),
+                     registry)
+    collisions = result.metrics["collisions"]
+    assert collisions >= 1 and result.status == "failure", (result.status, result.reason)
+    assert result.reason == (f"the robot touched table ({collisions} contact(s); each stopped its motion and "
+                             "the run went on)")
+    assert result.metrics["views"] >= 3  # the run went on after the first contact
+
+
 FENCED = """
 name: fenced
 description: scene_small_mobile with its table inside a solid ring 0.65-1.6 m from its centre, 0.2 m high

@@ -197,6 +197,7 @@ class Mover:
         self.believed_q: Array | None = None if self.robot is None else np.asarray(self.robot.q, dtype=float).copy()
         self.travel_m = 0.0
         self.collisions = 0
+        self.touched: set[str] = set()  # the bodies of the true world the robot has touched
         self.failed_moves = 0
         self._pose: Pose | None = None  # free flyer: current sensor pose
         self._last_path: np.ndarray | None = None  # configurations of the last execution
@@ -395,6 +396,7 @@ class Mover:
         """Execute a plan or path with noise against the true world; odometry and bumper stop."""
         start = np.asarray(self.robot.q, dtype=float).copy()
         execution = self.robot.execute(plan, self.rng, noise=self.noise, world="true")
+        self.touched.update(body for event in execution.collisions for body in event.bodies)
         self._odometry(start, execution)
         self._back_off(execution)
         return execution

@@ -199,7 +199,12 @@ class SceneSession:
         few points to tell from noise that no closer view could reach) or of the scene's views
         (``budget_exhausted``: modelled below the target, or objects left unexplained); ("", "")
         otherwise. The per-object scan budget is Kriegel's n_abort, the thesis' own end of an object's
-        NBS loop, and counts as done."""
+        NBS loop, and counts as done. Before all of these, a run in which the robot touched the world is a
+        ``failure`` however well it explained the scene (each contact stopped its motion, as a bumper does,
+        and the exploration went on)."""
+        if self.mover.collisions:
+            return FAILURE, (f"the robot touched {', '.join(sorted(self.mover.touched))} "
+                             f"({self.mover.collisions} contact(s); each stopped its motion and the run went on)")
         target = self.settings.model_coverage
 
         def listed(objects: list[SceneObject]) -> str:
