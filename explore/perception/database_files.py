@@ -70,6 +70,7 @@ def is_locked(error: sqlite3.Error) -> bool:
 
 
 def locked(path: Path) -> BadInput:
+    """The one-line error for a database another process keeps locked (not a corrupted or foreign file)."""
     return BadInput(str(path), None, f"locked by another process for {BUSY_TIMEOUT_S:.0f} s (an explore run or "
                     "`explore db` command writing to it?); try again when it has finished; the file was left untouched")
 
