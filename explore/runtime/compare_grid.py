@@ -5,6 +5,7 @@ file names of a results folder."""
 from __future__ import annotations
 
 import itertools
+import json
 import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -175,6 +176,23 @@ class Grid:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def read_grid_file(out: Path) -> dict[str, Any] | None:
+    """The grid a results folder was made with (``compare.json``, written atomically), None if it has none; a
+    file that is not a JSON object is someone else's edit: refused, and left as it is."""
+    path = out / GRID_FILE
+    if not path.is_file():
+        return None
+    try:
+        grid = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise BadInput(str(path), None, f"not a comparison's grid file ({error}); restore it or choose another "
+                       "--out (the file was left untouched)") from None
+    if not isinstance(grid, dict):
+        raise BadInput(str(path), None, f"not a comparison's grid file (a JSON {type(grid).__name__}, expected an "
+                       "object); restore it or choose another --out (the file was left untouched)")
+    return grid
 
 
 OnDone = Callable[[RunSpec, dict[str, Any]], None]  # what an executor calls as each run ends

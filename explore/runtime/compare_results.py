@@ -16,7 +16,6 @@ from typing import Any
 
 from explore.core import FINISHED, BadInput, brief, read_text
 from explore.runtime.compare_grid import (
-    GRID_FILE,
     ID_COLUMNS,
     LIST_COLUMNS,
     METRIC_COLUMNS,
@@ -25,6 +24,7 @@ from explore.runtime.compare_grid import (
     ROW_STATUSES,
     Grid,
     RunSpec,
+    read_grid_file,
 )
 
 
@@ -180,8 +180,8 @@ def _check_row(path: Path, line: int, row: dict[str, Any]) -> None:
 
 def check_grid_file(out: Path, grid: Grid) -> None:
     """Refuse to mix runs with different defining settings in one results folder."""
-    previous = read_json(out / GRID_FILE)
-    if not isinstance(previous, dict):
+    previous = read_grid_file(out)
+    if previous is None:
         return
     current = json.loads(json.dumps(grid.to_dict()))
     for key in Grid.DEFINING:

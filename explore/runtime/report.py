@@ -26,13 +26,12 @@ from __future__ import annotations
 
 import base64
 import html
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from explore.core import FINISHED
-from explore.runtime.compare_grid import GRID_FILE, RUNS_DIR
+from explore.runtime.compare_grid import RUNS_DIR, read_grid_file
 from explore.runtime.report_plots import plot_coverage, plot_planners, plot_scans, plot_steps
 from explore.runtime.report_tables import (
     Table,
@@ -62,9 +61,7 @@ figure{margin:1em 0}img{max-width:100%;border:1px solid #ddd}figcaption{color:#5
 
 def write_report(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
     """Write summary.md, summary.json, the PNGs and report.html into ``out``; return the paths."""
-    grid = None
-    if (out / GRID_FILE).is_file():
-        grid = json.loads((out / GRID_FILE).read_text(encoding="utf-8"))
+    grid = read_grid_file(out)
     n_at = scans_at(rows, grid)
     tables = [*kriegel_tables(rows, n_at), vasquez_table(rows), planner_table(rows), status_table(rows)]
     steps = time_table(rows, out / RUNS_DIR)

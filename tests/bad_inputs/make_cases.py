@@ -258,6 +258,11 @@ def write_results() -> None:
     for name, data in cases.items():
         (out / name).mkdir(parents=True)
         (out / name / "results.csv").write_bytes(data)
+    grids = {"grid_garbage": b"not json {", "grid_list": b"[1, 2]\n"}  # a good results.csv, a damaged compare.json
+    for name, data in grids.items():
+        (out / name).mkdir(parents=True)
+        (out / name / "results.csv").write_bytes(b"run_id,status,coverage\nr1,success,0.9\n")
+        (out / name / "compare.json").write_bytes(data)
 
 
 def write_databases() -> None:
