@@ -113,7 +113,8 @@ def register(app: typer.Typer) -> None:
             record = database.add(name, loaded, provenance=provenance, world=world, replace=replace,
                                   descriptors=stored)
             kinds = ", ".join(record.descriptor_kinds) or "no descriptors"
-            console.print(f"added {record.name} ({record.triangles} triangles, {kinds}) to {database.path}")
+            triangles = f"{record.triangles} triangle" + ("" if record.triangles == 1 else "s")
+            console.print(f"added {record.name} ({triangles}, {kinds}) to {database.path}")
 
     @sub.command("remove")
     def remove(name: Annotated[str, typer.Argument(help="Object name.")], db: DbOption = None) -> None:
