@@ -64,6 +64,11 @@ class NameTaken(BadInput):
     have added it since the caller looked)."""
 
 
+def _refused(path: Path, error: sqlite3.Error, message: str) -> BadInput:
+    """The one-line error for an SQLite failure: a lock held past the busy timeout is said as such."""
+    return locked(path) if is_locked(error) else BadInput(str(path), None, message)
+
+
 @dataclass(frozen=True)
 class ObjectRecord:
     """One row of ``objects`` (the mesh is loaded by :meth:`ObjectDatabase.get`)."""
@@ -141,9 +146,7 @@ class ObjectDatabase:
                 isolation_level=None, check_same_thread=False,
             )
         except sqlite3.Error as error:
-            if is_locked(error):
-                raise locked(path) from None
-            raise BadInput(str(path), None, f"cannot open the object database: {error}") from None
+            raise _refused(path, error, f"cannot open the object database: {error}") from None
         db = cls(path, connection, path.with_suffix(".meshes"))
         try:
             db._initialise()
@@ -161,9 +164,7 @@ class ObjectDatabase:
             version = connection.execute("PRAGMA user_version").fetchone()[0]
             tables = {r[0] for r in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.Error as error:
-            if is_locked(error):
-                raise locked(path) from None
-            raise BadInput(str(path), None, f"cannot open the object database: {error}") from None
+            raise _refused(path, error, f"cannot open the object database: {error}") from None
         if version == 0 and app == 0 and not tables:
             connection.close()
             raise BadInput(str(path), None, "is empty, not an object database yet (`explore db add` creates one);"
@@ -196,9 +197,7 @@ class ObjectDatabase:
             con.execute("PRAGMA foreign_keys = ON")
             con.execute("PRAGMA synchronous = NORMAL")
         except sqlite3.DatabaseError as error:
-            if is_locked(error):
-                raise locked(self.path) from None
-            raise BadInput(str(self.path), None, f"not an explore object database ({error})") from None
+            raise _refused(self.path, error, f"not an explore object database ({error})") from None
         self.mesh_dir.mkdir(parents=True, exist_ok=True)
 
     @contextmanager
