@@ -45,7 +45,7 @@ from explore.perception.database_files import (
     SCHEMA_VERSION,
     check_identity,
     is_locked,
-    locked,
+    refused,
     validate_existing,
     write_mesh_atomic,
 )
@@ -62,11 +62,6 @@ DEFAULT_DB = "runs/objects.db"  # beside the runs that fill it, not in whatever 
 class NameTaken(BadInput):
     """:meth:`ObjectDatabase.add` of a name the database already holds (another run sharing it may
     have added it since the caller looked)."""
-
-
-def _refused(path: Path, error: sqlite3.Error, message: str) -> BadInput:
-    """The one-line error for an SQLite failure: a lock held past the busy timeout is said as such."""
-    return locked(path) if is_locked(error) else BadInput(str(path), None, message)
 
 
 @dataclass(frozen=True)
@@ -146,7 +141,7 @@ class ObjectDatabase:
                 isolation_level=None, check_same_thread=False,
             )
         except sqlite3.Error as error:
-            raise _refused(path, error, f"cannot open the object database: {error}") from None
+            raise refused(path, error, f"cannot open the object database: {error}") from None
         db = cls(path, connection, path.with_suffix(".meshes"))
         try:
             db._initialise()
@@ -164,7 +159,7 @@ class ObjectDatabase:
             version = connection.execute("PRAGMA user_version").fetchone()[0]
             tables = {r[0] for r in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.Error as error:
-            raise _refused(path, error, f"cannot open the object database: {error}") from None
+            raise refused(path, error, f"cannot open the object database: {error}") from None
         if version == 0 and app == 0 and not tables:
             connection.close()
             raise BadInput(str(path), None, "is empty, not an object database yet (`explore db add` creates one);"
@@ -197,7 +192,7 @@ class ObjectDatabase:
             con.execute("PRAGMA foreign_keys = ON")
             con.execute("PRAGMA synchronous = NORMAL")
         except sqlite3.DatabaseError as error:
-            raise _refused(self.path, error, f"not an explore object database ({error})") from None
+            raise refused(self.path, error, f"not an explore object database ({error})") from None
         self.mesh_dir.mkdir(parents=True, exist_ok=True)
 
     @contextmanager
@@ -208,7 +203,7 @@ class ObjectDatabase:
             con.execute("BEGIN IMMEDIATE")
         except sqlite3.OperationalError as error:
             if is_locked(error):
-                raise locked(self.path) from None
+                raise refused(self.path, error, str(error)) from None
             raise
         try:
             yield con

@@ -59,8 +59,9 @@ CREATE INDEX locations_object ON locations(object_id, id);
 _TABLES = {"objects", "descriptors", "locations"}
 
 
-def _foreign(path: Path, why: str) -> BadInput:
-    return BadInput(str(path), None, f"not an explore object database ({why}); the file was left untouched")
+def _foreign(path: Path, why: str, error: sqlite3.Error | None = None) -> BadInput:
+    message = f"not an explore object database ({why}); the file was left untouched"
+    return BadInput(str(path), None, message) if error is None else refused(path, error, message)
 
 
 def is_locked(error: sqlite3.Error) -> bool:
@@ -69,8 +70,11 @@ def is_locked(error: sqlite3.Error) -> bool:
     return isinstance(error, sqlite3.OperationalError) and any(w in str(error) for w in ("locked", "busy"))
 
 
-def locked(path: Path) -> BadInput:
-    """The one-line error for a database another process keeps locked (not a corrupted or foreign file)."""
+def refused(path: Path, error: sqlite3.Error, message: str) -> BadInput:
+    """The one-line error for an SQLite failure: ``message``, unless another process kept the file locked (then
+    that, not a corrupted or foreign file)."""
+    if not is_locked(error):
+        return BadInput(str(path), None, message)
     return BadInput(str(path), None, f"locked by another process for {BUSY_TIMEOUT_S:.0f} s (an explore run or "
                     "`explore db` command writing to it?); try again when it has finished; the file was left untouched")
 
@@ -102,7 +106,7 @@ def _check_readonly(path: Path) -> None:
     try:
         con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_S)
     except sqlite3.Error as error:
-        raise (locked(path) if is_locked(error) else _foreign(path, str(error))) from None
+        raise _foreign(path, str(error), error) from None
     try:
         app = con.execute("PRAGMA application_id").fetchone()[0]
         version = con.execute("PRAGMA user_version").fetchone()[0]
@@ -114,7 +118,7 @@ def _check_readonly(path: Path) -> None:
         if check != "ok":
             raise _foreign(path, f"corrupted: {check}")
     except sqlite3.DatabaseError as error:
-        raise (locked(path) if is_locked(error) else _foreign(path, f"corrupted: {error}")) from None
+        raise _foreign(path, f"corrupted: {error}", error) from None
     finally:
         con.close()
 
