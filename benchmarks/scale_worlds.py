@@ -35,7 +35,7 @@ NAMED = (("bunny", "bunny.obj", [90, 0, 0], 0.12), ("sorter", "toys/shape_sorter
          ("dish", "toys/concave_box.obj", [0, 0, 0], 0.12), ("domino", "domino/domino.urdf", [0, 0, 30], 0.08))
 GRID = (4, 3)  # cells per table along x, y
 ROBOTS: dict[str, dict[str, Any]] = {
-    "mobile_base": {"plugin": "mobile_base", "params": {"laser_height": 0.2, "replan_distance": 1.0}},
+    "mobile_base": {"plugin": "mobile_base", "params": {"laser_height": 0.2, "replan_distance": 0.25}},
     "mobile_manipulator": {"plugin": "mobile_manipulator",
                            "params": {"laser_height": 0.2, "keep_base": True, "drive_clearance": 0.15,
                                       "replan_distance": 1.0}},

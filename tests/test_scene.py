@@ -608,6 +608,30 @@ def test_a_laser_match_on_the_border_of_its_window_searches_on_beyond_it(open_wo
             assert moved < 0.01 and abs(math.degrees(believed[2] - true[2])) < 0.5, (turn, moved, believed - true)
 
 
+def test_a_noisy_base_stops_no_closer_to_the_table_than_its_heading_drift_allows(open_world, registry):
+    """The patrols' contacts came in the last steps of a drive, at goals 1-2 cm from a table: the
+    heading error of the last leg swings the base's corners. A base that drives in 0.25 m legs at
+    0.3 m/s (at most 1.5 legs, 26 steps of 50 ms, each erring sigma_w dt = 0.014 rad) keeps two
+    sigma of that swing at its 0.354 m corners, 5.0 cm, beyond its 1 cm clearance at a goal: a base
+    pose 4 cm from the table is out of reach, one 8 cm away is not; without noise both are."""
+    from explore.core import look_at
+    from explore.scene import Mover
+
+    with open_world("two_tables") as sim:  # table_b: a 0.8 m box centred at (1.3, -0.8), 0.72 m high
+        sim.robot.replan_distance = 0.25
+        steps = 1.5 * math.ceil(0.25 / (0.3 * 0.05))
+        noisy, exact = Mover(sim, registry, seed=0), Mover(sim, registry, noise=False)
+        assert noisy.stop_margin == pytest.approx(2.0 * 0.28 * 0.05 * math.sqrt(steps) * 0.25 * math.sqrt(2.0),
+                                                  rel=0.02)
+        assert exact.stop_margin == 0.0
+        reached = {}
+        for gap in (0.04, 0.08):
+            eye = [0.9 - 0.25 - gap, -0.8, 1.3]  # the camera above the centre of the 0.5 m base, west of the table
+            target = look_at(eye, [1.3, -0.8, 0.8])
+            reached[gap] = (noisy.reach(target) is not None, exact.reach(target) is not None)
+    assert reached == {0.04: (False, True), 0.08: (True, True)}, reached
+
+
 def test_a_base_left_inside_its_clearance_backs_off_along_its_heading(open_world, registry):
     """Noise can stop the base within its 1 cm planning clearance of the table, where every plan
     from there is refused. With no valid configuration on the last motion, the mover backs the

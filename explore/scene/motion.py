@@ -53,6 +53,9 @@ class Move:
     planner: str
 
 
+STOP_SIGMAS = 2.0  # a noisy base stops this many sigma of its last leg's heading swing clear (Mover.stop_margin)
+
+
 def _split_drive(robot: Any, plan: Any, length: float) -> tuple[Any, Any]:
     """(first leg, rest) of a plan at the base motion time of a straight ``length`` m drive;
     rest None when the plan moves its base for less than 1.5 legs (no short last leg).
@@ -204,6 +207,7 @@ class Mover:
         self._odometry_var = np.zeros(2)  # (translation m^2, rotation rad^2) since the last view
         self._drift_var = np.zeros(2)  # the same since the belief was last localised
         self._laser_rng = np.random.default_rng([seed, 1])
+        self._stop_margin: float | None = None
         self._occupied: OccupiedClearance | None = None  # the PVS's occupied voxels, for planning
         self._field: Any = None  # likelihood field of the known environment, built on first use
         self._surface: Any = None  # its surface samples and normals (a PlanarSurface), with the field
@@ -261,7 +265,9 @@ class Mover:
                 target = _ending_at(target, ik.poses[ik.reachable - 1][:3, 3])
             return target, list(ik.configs)
         q = robot.ik(np.asarray(target, dtype=float), self.rng)
-        return None if q is None else (target, [q])
+        if q is None or not self._room_to_stop(q):
+            return None
+        return target, [q]
 
     def laser_points(self, frame: Pose, rng: np.random.Generator, beams: int = 720) -> Points3 | None:
         """A planar 360-degree scan of the base's localisation laser (robot parameter
@@ -347,6 +353,41 @@ class Mover:
             true_target = ScanPath(true_start, end, target.speed)
         self.collisions += collisions
         return Move(true_target, believed, travel, planning_s, collisions, getattr(plan, "planner", ""))
+
+    @property
+    def stop_margin(self) -> float:
+        """How much farther than its clearance a noisy base that drives in legs keeps its goal from
+        the known environment (:meth:`reach`): ``STOP_SIGMAS`` sigma of how far the heading error
+        of a last leg (at most 1.5 legs, :func:`_split_drive`) swings the robot's outermost point
+        about its base. The heading errs sigma_omega dt at each of the leg's n steps (Vasquez-Gomez
+        Sec. A6), sigma_omega dt sqrt(n) at its end. The scene patrols' contacts came in the last
+        steps of a last leg, at goals 1-2 cm from a table. 0 without noise or legs (an open-loop
+        base's error has no such bound)."""
+        if self._stop_margin is None:
+            self._stop_margin = 0.0
+            leg = float(self.robot.replan_distance) if self.base_dofs else 0.0
+            if self.noise and leg > 0.0:
+                robot = self.robot
+                speed = float(robot.base_control_limits()[0])
+                steps = 1.5 * math.ceil(leg / (speed * float(robot.dt)))
+                heading = float(robot.control_sigma()[robot.n_base_controls - 1]) * float(robot.dt) * math.sqrt(steps)
+                ix, iy, _ = self.base_dofs
+                q = np.asarray(robot.q, dtype=float)
+                points = robot.link_points(q)
+                radius = float(np.hypot(points[:, 0] - q[ix], points[:, 1] - q[iy]).max(initial=0.0))
+                self._stop_margin = STOP_SIGMAS * heading * radius
+        return self._stop_margin
+
+    def _room_to_stop(self, goal: Array) -> bool:
+        """The base at ``goal`` keeps its clearance plus :attr:`stop_margin` from the known
+        environment's bodies beside it (:class:`~explore.motion.PlanarChecker`; not the floor)."""
+        if self.stop_margin <= 0.0:
+            return True
+        from explore.motion import PlanarChecker
+
+        problem = self._problem()
+        checker = PlanarChecker(problem, goal, drive_margin=problem.margin + self.stop_margin)
+        return checker(np.asarray(goal, dtype=float)[list(self.base_dofs)])
 
     def _valid_sweep(self, problem: Any, target: ScanPath, sweep: Array) -> tuple[ScanPath, Array] | None:
         """The scan's configurations up to the first one the motion problem refuses (the PVS's
