@@ -38,7 +38,7 @@ ROBOTS: dict[str, dict[str, Any]] = {
     "mobile_base": {"plugin": "mobile_base", "params": {"laser_height": 0.2, "replan_distance": 0.25}},
     "mobile_manipulator": {"plugin": "mobile_manipulator",
                            "params": {"laser_height": 0.2, "keep_base": True, "drive_clearance": 0.15,
-                                      "replan_distance": 1.0}},
+                                      "replan_distance": 0.25}},
 }
 SENSOR = {"plugin": "depth_camera", "params": {"profile": "kinect", "width": 320, "height": 240, "min_range": 0.3,
                                                 "max_range": 3.5, "color": True}}

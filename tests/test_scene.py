@@ -732,13 +732,13 @@ def _explore_scene(registry, tmp_path, tree: str, world: str) -> tuple[dict, Pat
 
 @pytest.mark.slow
 def test_scene_exploration_with_the_mobile_manipulator(registry, tmp_path):
-    """The mobile manipulator (tuck and drive in 1 m legs, base laser on the walls and table legs):
+    """The mobile manipulator (tuck and drive in 0.25 m legs, base laser on the walls and table legs):
     every cluster is explained, the base bumps into something at most twice, every view is
     localised by the base laser as it drives (its recorded pose within 3 cm / 1 deg of the true one
     on average; odometry alone drifts decimetres), and the known objects are recognised within
     5 mm / 2 deg in the map and, in the world, within 5 mm plus twice the mean localisation error."""
     metrics, _ = _explore_scene(registry, tmp_path, "scene_exploration", "scene_small_mm")
-    assert metrics["collisions"] <= 2  # driving in 1 m legs with 15 cm to spare (open loop: 8)
+    assert metrics["collisions"] <= 2  # driving in legs with 15 cm to spare (open loop: 8)
     localised = metrics["pose_graph"]
     assert localised["corrected_mm"] <= 30.0 and localised["corrected_deg"] <= 1.0, localised
     for row in [o for o in metrics["objects"] if o["known"]]:
