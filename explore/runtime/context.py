@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from explore.core import BadInput
 from explore.runtime.rerun_log import RerunLog
 from explore.runtime.run_inputs import (
     RunConfig,
@@ -56,7 +57,10 @@ class RunContext:
             self.sim = Simulation(spec)
             sensor = (config.sensor or spec.sensor.plugin, self._plugin_params("sensor", spec.sensor))
             robot = (config.robot or spec.robot.plugin, self._plugin_params("robot", spec.robot))
-            self.sim.attach_plugins(registry, sensor=sensor, robot=robot)
+            try:
+                self.sim.attach_plugins(registry, sensor=sensor, robot=robot)
+            except BadInput as error:
+                raise self._blame_settings(error, spec, {"sensor": sensor, "robot": robot}) from None
             if config.rerun is not None:
                 self.rerun = RerunLog(config.rerun)
                 self.rerun.world(self.sim)
@@ -66,6 +70,22 @@ class RunContext:
         except BaseException:
             self.close()
             raise
+
+    def _blame_settings(self, error: BadInput, spec: Any, chosen: dict[str, tuple[str, dict]]) -> BadInput:
+        """A plugin's own consistency check (e.g. max_range above min_range) that fails only with the
+        ``--set`` overrides names them, not the world file whose parameters are fine without them."""
+        kind = (error.field or "").split(" ")[0]
+        scoped = self.config.scoped(kind) if kind in chosen else {}
+        if not scoped or error.source != str(spec.path):
+            return error
+        name, params = chosen[kind]
+        without = {key: value for key, value in params.items() if key not in scoped}
+        try:
+            self.registry.create(kind, name, without, str(spec.path), kind)
+        except Exception:  # noqa: BLE001 - the world's own parameters fail too: its error stands
+            return error
+        keys = ", ".join(f"{kind}.{key}" for key in scoped)
+        return BadInput("--set", keys, f"{error.message} ({error.field}, the other parameters from {spec.path})")
 
     def _plugin_params(self, kind: str, plugin_spec: Any) -> dict[str, Any]:
         chosen = getattr(self.config, kind)
