@@ -50,6 +50,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Simulate one scan of a world and write the measured points."""
         from explore.core import parse_assignment, save_points_png
+        from explore.runtime import attach_plugins
         from explore.sim import Simulation, target_for
 
         from .main import console, out_path, registry
@@ -64,9 +65,10 @@ def register(app: typer.Typer) -> None:
         reg = registry()
         with Simulation(world, None) as sim:
             params = dict(sim.spec.sensor.params) if sensor in (None, sim.spec.sensor.plugin) else {}
-            params.update(parse_assignment(item) for item in (set_ or []))
+            given = dict(parse_assignment(item) for item in (set_ or []))
+            params.update(given)
             name = sensor or sim.spec.sensor.plugin
-            sim.attach_plugins(reg, sensor=(name, params))
+            attach_plugins(sim, reg, {"sensor": (name, params)}, {"sensor": given}, prefixed=False)
             spec = sim.spec
             gap = float(np.abs(eye - np.clip(eye, spec.region_min, spec.region_max)).max())
             if gap > sim.sensor.max_range + sweep:

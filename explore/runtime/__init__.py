@@ -15,7 +15,7 @@ from explore.runtime.registry import KINDS, Registry
 from explore.runtime.report import write_report
 from explore.runtime.report_tables import step_times
 from explore.runtime.run import execute
-from explore.runtime.run_inputs import RunConfig, check_inputs, default_out_dir
+from explore.runtime.run_inputs import RunConfig, attach_plugins, check_inputs, default_out_dir
 from explore.runtime.rundiff import comparable, differences, load_run, run_differences
 from explore.runtime.trees import build, find_tree, list_trees, load_tree
 
@@ -32,6 +32,7 @@ __all__ = [
     "Registry",
     "RunConfig",
     "RunSpec",
+    "attach_plugins",
     "build",
     "check_inputs",
     "comparable",

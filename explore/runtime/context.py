@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import BadInput
 from explore.runtime.rerun_log import RerunLog
 from explore.runtime.run_inputs import (
     RunConfig,
+    attach_plugins,
     jsonable,
 )
 from explore.runtime.video import RunVideo, record_scans
@@ -57,10 +57,8 @@ class RunContext:
             self.sim = Simulation(spec)
             sensor = (config.sensor or spec.sensor.plugin, self._plugin_params("sensor", spec.sensor))
             robot = (config.robot or spec.robot.plugin, self._plugin_params("robot", spec.robot))
-            try:
-                self.sim.attach_plugins(registry, sensor=sensor, robot=robot)
-            except BadInput as error:
-                raise self._blame_settings(error, spec, {"sensor": sensor, "robot": robot}) from None
+            attach_plugins(self.sim, registry, {"sensor": sensor, "robot": robot},
+                           {kind: config.scoped(kind) for kind in ("sensor", "robot")})
             if config.rerun is not None:
                 self.rerun = RerunLog(config.rerun)
                 self.rerun.world(self.sim)
@@ -70,22 +68,6 @@ class RunContext:
         except BaseException:
             self.close()
             raise
-
-    def _blame_settings(self, error: BadInput, spec: Any, chosen: dict[str, tuple[str, dict]]) -> BadInput:
-        """A plugin's own consistency check (e.g. max_range above min_range) that fails only with the
-        ``--set`` overrides names them, not the world file whose parameters are fine without them."""
-        kind = (error.field or "").split(" ")[0]
-        scoped = self.config.scoped(kind) if kind in chosen else {}
-        if not scoped or error.source != str(spec.path):
-            return error
-        name, params = chosen[kind]
-        without = {key: value for key, value in params.items() if key not in scoped}
-        try:
-            self.registry.create(kind, name, without, str(spec.path), kind)
-        except Exception:  # noqa: BLE001 - the world's own parameters fail too: its error stands
-            return error
-        keys = ", ".join(f"{kind}.{key}" for key in scoped)
-        return BadInput("--set", keys, f"{error.message} ({error.field}, the other parameters from {spec.path})")
 
     def _plugin_params(self, kind: str, plugin_spec: Any) -> dict[str, Any]:
         chosen = getattr(self.config, kind)

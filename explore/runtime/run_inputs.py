@@ -140,6 +140,29 @@ def remove_run_files(out_dir: Path, created: Path | None) -> None:
         (out_dir / name).unlink(missing_ok=True)
 
 
+def attach_plugins(sim: Any, registry: Any, chosen: dict[str, tuple[str, dict[str, Any]]],
+                   overrides: dict[str, dict[str, Any]], prefixed: bool = True) -> None:
+    """``sim.attach_plugins`` with the sensor and robot ``chosen`` (kind -> (plugin, parameters)). A
+    plugin's own consistency check (e.g. max_range above min_range) that fails only with the ``--set``
+    ``overrides`` (kind -> the keys given) names them, not the world file, whose parameters pass
+    without them; keys read ``kind.key`` (``explore run``) or ``key`` (``prefixed`` False)."""
+    try:
+        sim.attach_plugins(registry, **chosen)
+    except BadInput as error:
+        kind = (error.field or "").split(" ")[0]
+        given = overrides.get(kind, {})
+        if not given or kind not in chosen or error.source != str(sim.spec.path):
+            raise
+        name, params = chosen[kind]
+        try:
+            registry.create(kind, name, {k: v for k, v in params.items() if k not in given}, error.source, kind)
+        except Exception:  # noqa: BLE001 - the world's own parameters fail too: its error stands
+            raise error from None
+        keys = ", ".join(f"{kind}.{key}" if prefixed else key for key in given)
+        raise BadInput("--set", keys, f"{error.message} ({error.field}, the other parameters from "
+                                      f"{error.source})") from None
+
+
 def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     """Everything that can be checked before a run starts: the tree, the world, plugin names,
     ``--set`` keys and plugin parameters, the Rerun file. Raises :class:`BadInput`."""
