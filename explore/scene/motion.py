@@ -334,25 +334,24 @@ class Mover:
             self.failed_moves += 1
             return None
         start_pose = robot.fk(start)
-        collisions = self._drive(problem, plan)
+        before = self.collisions
+        self._drive(problem, plan)
         true_start = robot.fk(robot.q)
         travel = float(np.linalg.norm(true_start[:3, 3] - start_pose[:3, 3]))
         self.travel_m += travel
-        if collisions and isinstance(target, ScanPath):  # stopped short of the scan's start: no sweep from there
-            self.collisions += collisions
+        if self.collisions > before and isinstance(target, ScanPath):  # stopped short of the scan's start: no sweep
             self.failed_moves += 1
             return None
         believed = self.believed_pose()
         true_target: Target = true_start
         if isinstance(target, ScanPath) and len(sweep) > 1:
             path = np.vstack([robot.q, sweep[1:] - sweep[0] + robot.q])
-            collisions += len(self._execute(path).collisions)
+            self._execute(path)
             true_end = robot.fk(robot.q)
             end = true_start.copy()
             end[:3, 3] = true_end[:3, 3]
             true_target = ScanPath(true_start, end, target.speed)
-        self.collisions += collisions
-        return Move(true_target, believed, travel, planning_s, collisions, getattr(plan, "planner", ""))
+        return Move(true_target, believed, travel, planning_s, self.collisions - before, getattr(plan, "planner", ""))
 
     @property
     def stop_margin(self) -> float:
@@ -405,8 +404,8 @@ class Mover:
         self.robot.set_config(self.robot.q)  # fk may move the bodies
         return _ending_at(target, last), sweep[:keep]
 
-    def _drive(self, problem: Any, plan: Any) -> int:
-        """Execute ``plan`` with noise; the number of collisions.
+    def _drive(self, problem: Any, plan: Any) -> None:
+        """Execute ``plan`` with noise (a contact ends the drive).
 
         With the robot parameter ``replan_distance`` > 0 (a base that localises while it
         drives, as a path-following controller would) the plan is executed in legs of that
@@ -416,27 +415,23 @@ class Mover:
         Sec. A6). A correction that cannot be planned is skipped (the leg goes on open loop).
         """
         leg_length = float(self.robot.replan_distance)
-        collisions = 0
         while True:
             leg, rest = (plan, None) if leg_length <= 0.0 or not self.base_dofs else \
                 _split_drive(self.robot, plan, leg_length)
             execution = self._execute(leg)
-            collisions += len(execution.collisions)
             self.localise()
             if execution.collided or rest is None:
-                return collisions
+                return
             correction = self._correction(problem, rest.path[0])
-            if correction is not None:
-                execution = self._execute(correction)
-                collisions += len(execution.collisions)
-                if execution.collided:
-                    return collisions
+            if correction is not None and self._execute(correction).collided:
+                return
             plan = rest
 
     def _execute(self, plan: Any) -> Any:
-        """Execute a plan or path with noise against the true world; odometry and bumper stop."""
+        """Execute a plan or path with noise against the true world; contacts, odometry and bumper stop."""
         start = np.asarray(self.robot.q, dtype=float).copy()
         execution = self.robot.execute(plan, self.rng, noise=self.noise, world="true")
+        self.collisions += len(execution.collisions)
         self.touched.update(body for event in execution.collisions for body in event.bodies)
         self._odometry(start, execution)
         self._back_off(execution)
@@ -525,8 +520,7 @@ class Mover:
             goal = self._escape(problem)
             if goal is None:
                 return
-            execution = self._execute(np.vstack([self.robot.q, goal]))
-            self.collisions += len(execution.collisions)
+            self._execute(np.vstack([self.robot.q, goal]))
 
     def _escape(self, problem: Any) -> Array | None:
         """The latest valid configuration of the last motion, else (a base) the nearest base
