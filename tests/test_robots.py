@@ -147,6 +147,41 @@ def test_execution_records_collisions_with_the_true_world_only(open_world) -> No
         assert not known.collided and np.allclose(known.final, b)
 
 
+SQUARE_TABLE = """
+name: square_table
+description: pybullet_data's table_square, whose top is a link below an empty base link
+environment:
+  - {name: floor, box: [4.0, 4.0, 0.02], position: [0.0, 0.0, -0.01]}
+  - {name: table, source: table_square/table_square.urdf, position: [0.0, 0.0, 0.32]}
+objects:
+  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.0, 0.0], on_top_of: table}
+region: {min: [-0.3, -0.3, 0.6], max: [0.3, 0.3, 0.8]}
+robot: {plugin: mobile_base, base: [0.0, -1.0, 0.0, 90.0]}
+sensor: {plugin: depth_camera, params: {width: 160, height: 120, min_range: 0.3, max_range: 2.0}}
+"""
+
+
+def test_a_body_whose_shape_is_in_a_child_link_is_an_obstacle(open_world, tmp_path) -> None:
+    """The collision pre-filter took an environment body's box from its base link alone; table_square's
+    base link is empty (a point on the floor), so the mast passed through the 0.6 m tabletop unseen.
+    With the box around every link, the base 0.2 m inside the top's edge collides with it (known and
+    true world, and for the planar checker), and 0.1 m outside it does not."""
+    from explore.motion import MotionProblem, PlanarChecker
+
+    world = tmp_path / "square_table.yaml"
+    world.write_text(SQUARE_TABLE, encoding="utf-8")
+    with open_world(world) as sim:
+        robot = sim.robot
+        checker = PlanarChecker(MotionProblem(robot), robot.q)
+        verdicts = {}
+        for y in (-0.4, -0.1):  # the mast at the base's centre; the top spans y -0.3..0.3 at 0.56-0.64 m
+            q = np.asarray(robot.q, dtype=float).copy()
+            q[1] = y
+            verdicts[y] = (robot.in_collision(q, world="known", margin=0.0), "table" in robot.collisions(q, "true", 0.0),
+                           not checker(q[:3]))
+    assert verdicts == {-0.4: (False, False, False), -0.1: (True, True, True)}, verdicts
+
+
 def _through_the_bunny(robot) -> MotionPlan:
     a = robot.ik(look_at([-0.3, 0.0, 0.62], [0.0, 0.0, 0.6]))
     b = robot.ik(look_at([0.3, 0.0, 0.62], [0.6, 0.0, 0.6]))

@@ -16,7 +16,7 @@ from explore.motion.collision import BulletCollider, Part
 from explore.motion.noise import STILL, truncated_normal, truncated_normal_logpdf
 from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Robot
-from explore.sim import frame_pose, p
+from explore.sim import body_aabb, frame_pose, p
 
 
 def _surface_samples(vertices: Array, triangles: np.ndarray, spacing: float) -> Points3:
@@ -430,7 +430,7 @@ class BulletRobot(Robot):
         """x, y extent of the known environment (bounds of a mobile base)."""
         assert self.sim is not None
         ids = self.sim.environment_ids()
-        boxes = np.array([np.ravel(p.getAABB(b, physicsClientId=self.client)) for b in ids])
+        boxes = np.array([np.ravel(body_aabb(b, self.client)) for b in ids])
         lo, hi = boxes[:, :2].min(axis=0) - pad, boxes[:, 3:5].max(axis=0) + pad
         return lo, hi
 

@@ -33,9 +33,9 @@ class BulletCollider:
         self_pairs: Sequence[tuple[Part, Part]] = (),
         ignore: Sequence[tuple[Part, int]] = (),
     ) -> None:
-        from explore.sim import p
+        from explore.sim import body_aabb, p
 
-        self.p = p
+        self.p, self._body_aabb = p, body_aabb
         self.client = client
         self.parts = list(parts)
         self.self_pairs = list(self_pairs)
@@ -53,8 +53,7 @@ class BulletCollider:
         out = []
         for body in bodies:
             if body not in self._aabb:
-                lo, hi = self.p.getAABB(body, physicsClientId=self.client)
-                self._aabb[body] = (tuple(lo), tuple(hi))
+                self._aabb[body] = self._body_aabb(body, self.client)
             out.append((body, *self._aabb[body]))
         return out
 

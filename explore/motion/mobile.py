@@ -70,11 +70,11 @@ class PlanarChecker:
         boxes = []
         sim = getattr(robot, "sim", None)
         if sim is not None and len(points):
-            from explore.sim import p
+            from explore.sim import body_aabb
 
             zmin, zmax = float(self.z.min()), float(self.z.max())
             for body in sim.environment_ids():
-                lo, hi = p.getAABB(body, physicsClientId=sim.client)
+                lo, hi = body_aabb(body, sim.client)
                 if hi[2] <= zmin - self.margin or lo[2] >= zmax + self.margin:
                     continue
                 boxes.append((lo, hi))

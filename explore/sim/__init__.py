@@ -14,7 +14,7 @@ from explore.sim.artefacts import (
     quantise_disparity,
     smooth_field,
 )
-from explore.sim.bullet import frame_pose, p
+from explore.sim.bullet import body_aabb, frame_pose, p
 from explore.sim.meshes import TriMesh, box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 from explore.sim.scan import Scan, ScanPath
 from explore.sim.sensing import NOISE_MODELS, RaySensor, noise_sigma, sigma_kinect, sigma_laser_poly, sigma_tof
@@ -32,6 +32,7 @@ __all__ = [
     "Simulation",
     "TriMesh",
     "WorldSpec",
+    "body_aabb",
     "box_mesh",
     "correlated_field",
     "dark_return_probability",

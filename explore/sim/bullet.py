@@ -34,6 +34,20 @@ def link_frame_pose(body: int, link: int, client: int) -> Pose:
     return frame_pose(state[4], state[5])
 
 
+def body_aabb(body: int, client: int) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The axis-aligned box around every link of ``body`` that has a collision shape (lo, hi).
+
+    ``p.getAABB(body)`` is the base link's alone: pybullet_data's ``table_square`` keeps its top in
+    a link below an empty base, whose box is a point on the floor, so a collision pre-filter on it
+    let a robot's mast pass through the tabletop.
+    """
+    boxes = np.array([np.ravel(p.getAABB(body, link, physicsClientId=client))
+                      for link in range(-1, p.getNumJoints(body, physicsClientId=client))])
+    solid = boxes[(boxes[:, 3:] - boxes[:, :3]).max(axis=1) > 0.0]  # a link without a shape is a point
+    boxes = solid if len(solid) else boxes[:1]
+    return tuple(boxes[:, :3].min(axis=0).tolist()), tuple(boxes[:, 3:].max(axis=0).tolist())
+
+
 def body_visual_meshes(body: int, client: int) -> list[TriMesh]:
     """The visual geometry of every link of ``body`` as triangle meshes in the world frame."""
     meshes = []
