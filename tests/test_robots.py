@@ -177,8 +177,8 @@ def test_a_body_whose_shape_is_in_a_child_link_is_an_obstacle(open_world, tmp_pa
         for y in (-0.4, -0.1):  # the mast at the base's centre; the top spans y -0.3..0.3 at 0.56-0.64 m
             q = np.asarray(robot.q, dtype=float).copy()
             q[1] = y
-            verdicts[y] = (robot.in_collision(q, world="known", margin=0.0), "table" in robot.collisions(q, "true", 0.0),
-                           not checker(q[:3]))
+            verdicts[y] = (robot.in_collision(q, world="known", margin=0.0),
+                           "table" in robot.collisions(q, "true", 0.0), not checker(q[:3]))
     assert verdicts == {-0.4: (False, False, False), -0.1: (True, True, True)}, verdicts
 
 

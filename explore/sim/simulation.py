@@ -307,9 +307,14 @@ class Simulation:
             if body.source.suffix.lower() == ".urdf":
                 return p.loadURDF(str(body.source), useFixedBase=True, globalScaling=scale, physicsClientId=self.client)
             ids = p.loadSDF(str(body.source), globalScaling=scale, physicsClientId=self.client)
-            return ids[0]
         except p.error as error:
             raise BadInput(str(self.spec.path), f"{where}.source", f"pybullet cannot load it: {error}") from None
+        if len(ids) != 1:  # e.g. pybullet_data's stadium.sdf: the others would stand in the world unseen
+            for extra in ids:
+                p.removeBody(extra, physicsClientId=self.client)
+            raise BadInput(str(self.spec.path), f"{where}.source", f"{body.source.name} holds {len(ids)} models; "
+                           "a body takes one (give each model a file of its own)")
+        return ids[0]
 
     def _check_region(self) -> None:
         tol = 1e-3

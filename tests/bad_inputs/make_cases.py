@@ -79,6 +79,7 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "source_ply_garbage": ("cannot read mesh", [("source: bunny.obj", "source: ../meshes/garbage.ply")]),
     "source_stl_garbage": ("cannot read mesh", [("source: bunny.obj", "source: ../meshes/garbage.stl")]),
     "source_urdf_garbage": ("pybullet cannot load it", [("source: bunny.obj", "source: ../meshes/garbage.urdf")]),
+    "source_sdf_several_models": ("stadium.sdf holds 3 models", [("source: bunny.obj", "source: stadium.sdf")]),
     "source_urdf_no_visual": ("no visual geometry", [("source: bunny.obj", "source: ../meshes/no_visual.urdf")]),
     "source_is_folder": ("file not found", [("source: bunny.obj", "source: ../meshes")]),
     "source_in_millimetres": ("is its mesh in millimetres?", [("source: bunny.obj", "source: ../meshes/box_mm.obj"), ("    size: 0.15\n", "")]),
