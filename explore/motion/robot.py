@@ -64,7 +64,8 @@ class Robot(Plugin, ABC):
     drive_clearance : extra margin (m) kept while a base drives
     camera_height : height (m) of a camera fixed on the base (views are planned at it), or None
     laser_height : height (m) of the planar localisation laser (0: none)
-    replan_distance : scene exploration drives in legs of this length (m), 0 = in one go
+    replan_distance : scene exploration drives in legs of this length (m), 0 = in one go; a noisy
+        base with legs stops clear of the known environment by its last leg's heading swing
     truncation : positioning noise is truncated at ``truncation`` x sigma
     sim : the :class:`~explore.sim.simulation.Simulation` after :meth:`attach`
     """
