@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from explore.sim import body_aabb
+
 
 # -- pybullet collision checking ---------------------------------------------------------------
 @dataclass(frozen=True)
@@ -33,9 +35,9 @@ class BulletCollider:
         self_pairs: Sequence[tuple[Part, Part]] = (),
         ignore: Sequence[tuple[Part, int]] = (),
     ) -> None:
-        from explore.sim import body_aabb, p
+        from explore.sim import p
 
-        self.p, self._body_aabb = p, body_aabb
+        self.p = p
         self.client = client
         self.parts = list(parts)
         self.self_pairs = list(self_pairs)
@@ -53,7 +55,7 @@ class BulletCollider:
         out = []
         for body in bodies:
             if body not in self._aabb:
-                self._aabb[body] = self._body_aabb(body, self.client)
+                self._aabb[body] = body_aabb(body, self.client)
             out.append((body, *self._aabb[body]))
         return out
 
