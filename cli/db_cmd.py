@@ -78,12 +78,15 @@ def register(app: typer.Typer) -> None:
 
         import numpy as np
 
+        from explore.perception import PROVENANCES
         from explore.sim import TriMesh, read_mesh
 
         from .main import console
 
         if not math.isfinite(scale) or scale <= 0:
             raise BadInput("--scale", None, f"{scale} must be a positive number")
+        if provenance not in PROVENANCES:
+            raise BadInput("--provenance", None, f"{provenance!r} is not one of {', '.join(PROVENANCES)}")
         if check_path_name(mesh).is_dir():
             raise BadInput(str(mesh), None, "is a folder, expected a mesh file")
         if not mesh.is_file():

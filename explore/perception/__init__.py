@@ -23,7 +23,7 @@ from explore.perception.contracts import (
     Segmenter,
     require_role,
 )
-from explore.perception.database import NameTaken, ObjectDatabase, default_path, object_frame
+from explore.perception.database import PROVENANCES, NameTaken, ObjectDatabase, default_path, object_frame
 from explore.perception.depth_filters import (
     DepthProcessing,
     depth_image,
@@ -106,6 +106,7 @@ __all__ = [
     "OCCUPIED_FROM",
     "NameTaken",
     "ObjectDatabase",
+    "PROVENANCES",
     "PPFRecognizer",
     "PlaneClusterSegmenter",
     "PlaneRegistrar",

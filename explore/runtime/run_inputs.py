@@ -170,6 +170,11 @@ def check_inputs(config: RunConfig, registry: Any) -> tuple[Any, dict[str, dict[
         raise BadInput("--seed", str(config.seed), "must be an integer >= 0")
     if config.max_scans is not None and (isinstance(config.max_scans, bool) or config.max_scans < 1):
         raise BadInput("--max-scans", str(config.max_scans), "must be at least 1")
+    named = {"TREE": config.tree, "--world": config.world, "--strategy": config.strategy,
+             "--planner": config.planner, "--robot": config.robot, "--sensor": config.sensor}
+    for option, name in named.items():
+        if name is not None and not str(name).strip():
+            raise BadInput(option, None, "an empty name")
     tree_file = load_tree(config.tree, registry)
     overrides = _behaviour_overrides(config, tree_file, registry)
     spec = load_world_spec(config.world)

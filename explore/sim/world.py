@@ -93,6 +93,9 @@ def find_world(name_or_path: str | Path) -> Path:
     candidate = check_path_name(name_or_path)
     if candidate.suffix in (".yaml", ".yml") and candidate.is_file():
         return candidate
+    if candidate.is_file() and candidate.suffix.lower() in BODY_SUFFIXES:
+        raise BadInput(str(name_or_path), None, f"a {candidate.suffix} file, not a world: a world is a YAML "
+                                                f"file whose bodies name such files as `source:` (see worlds/)")
     for folder in world_search_path():
         for suffix in (".yaml", ".yml", ""):
             path = folder / f"{name_or_path}{suffix}"
