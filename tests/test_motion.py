@@ -150,6 +150,7 @@ def test_scene_motion_passes_unknown_space_but_keeps_the_margin_from_occupied_vo
     assert len(kept) == first and np.allclose(shortened.end[:3, 3], robot.fk(sweep[first - 1])[:3, 3])
     mover.min_path_fraction = 0.95  # less of it than the shortest share still scanned: no scan
     assert mover._valid_sweep(problem, target, sweep) is None
+    assert mover.move(target, sweep) is None and mover.failed_moves == 1  # the run's metrics: moves_failed
 
     # a voxel on the known table's top and a point 2 cm above it
     top = workcell.environment_caster().closest(np.array([[0.75, 0.0, 0.5]]))[0][0]

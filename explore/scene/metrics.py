@@ -244,6 +244,7 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
         "scene_elapsed_s": summary["elapsed_s"],
         "travel_m": summary["travel_m"],
         "collisions": summary["collisions"],
+        "moves_failed": summary["moves_failed"],
         "wrong_matches": wrong,
         "recognition_precision": correct_recognitions / recognitions if recognitions else math.nan,
         "recognition_recall": correct_recognitions / known_present if known_present else math.nan,

@@ -452,6 +452,7 @@ class SceneSession:
             "elapsed_s": time.perf_counter() - self.started,
             "travel_m": self.mover.travel_m,
             "collisions": self.mover.collisions,
+            "moves_failed": self.mover.failed_moves,
             "added_to_database": list(self.added),
             "timings_s": dict(self.timings),
             "objects_found": [
