@@ -55,7 +55,7 @@ class DepthCamera(RaySensor):
         Param("max_range", float, 3.5, "m", "farthest measurable range", low=0.01),
         Param("subsample", int, 1, "px", "keep every n-th pixel row and column", low=1, high=1024),
         Param("noise", str, "kinect", "", "range noise model", choices=NOISE_MODELS),
-        Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0),
+        Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0, high=100.0),
         Param("max_incidence_deg", float, 85.0, "deg", "no return beyond this incidence angle", low=0.0, high=90.0),
         Param("grazing_from_deg", float, 90.0, "deg", "returns thin out (linearly in cos) from this incidence "
               "angle to max_incidence_deg", low=0.0, high=90.0),
@@ -216,7 +216,7 @@ class LaserStriper(RaySensor):
         Param("rate_hz", float, 25.0, "Hz", "stripes per second", low=0.01),
         Param("speed", float, 0.05, "m/s", "default scan speed along a path", low=1e-4),
         Param("noise", str, "laser_poly", "", "range noise model", choices=NOISE_MODELS),
-        Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0),
+        Param("noise_scale", float, 1.0, "", "multiplier on the noise sigma", low=0.0, high=100.0),
         Param("max_incidence_deg", float, 80.0, "deg", "no return beyond this incidence angle", low=0.0, high=90.0),
         Param("grazing_from_deg", float, 90.0, "deg", "returns thin out (linearly in cos) from this incidence "
               "angle to max_incidence_deg", low=0.0, high=90.0),
