@@ -37,7 +37,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from explore.mapping.traversal import next_axis, ray_start
+from explore.mapping.traversal import next_axis, ray_start, step
 
 if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY" not in os.environ:
     # the TBB in the wheel set is too old and numba warns when it tries it first
@@ -91,8 +91,6 @@ def cast_rays(
     """
     n0, n1, n2 = grid.shape
     flat = grid.reshape(-1)
-    st0 = n1 * n2
-    st1 = n2
     inv_res = 1.0 / res
     n = origins.shape[0]
     hit_t = np.full(n, np.inf)
@@ -144,24 +142,11 @@ def cast_rays(
             if t_exit >= t1:
                 break
             t_in = t_exit
-            if dd == 0:
-                i0 += s0
-                tm0 += td0
-                idx += s0 * st0
-                if i0 < 0 or i0 >= n0:
-                    break
-            elif dd == 1:
-                i1 += s1
-                tm1 += td1
-                idx += s1 * st1
-                if i1 < 0 or i1 >= n1:
-                    break
-            else:
-                i2 += s2
-                tm2 += td2
-                idx += s2
-                if i2 < 0 or i2 >= n2:
-                    break
+            i0, i1, i2, tm0, tm1, tm2, inside = step(
+                dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+            if not inside:
+                break
+            idx = (i0 * n1 + i1) * n2 + i2
         entropy[r] = h_sum
         unknown[r] = n_unk
         occupied[r] = n_occ
@@ -203,8 +188,6 @@ def entropy_visited(grid, visited, stamp, lat, res, origins, directions, max_ran
     n0, n1, n2 = grid.shape
     flat = grid.reshape(-1)
     vflat = visited.reshape(-1)
-    st0 = n1 * n2
-    st1 = n2
     inv_res = 1.0 / res
     total = 0.0
     distinct = 0
@@ -234,22 +217,9 @@ def entropy_visited(grid, visited, stamp, lat, res, origins, directions, max_ran
                 distinct += 1
             if lo >= l_stop or t_exit >= t1:
                 break
-            if dd == 0:
-                i0 += s0
-                tm0 += td0
-                idx += s0 * st0
-                if i0 < 0 or i0 >= n0:
-                    break
-            elif dd == 1:
-                i1 += s1
-                tm1 += td1
-                idx += s1 * st1
-                if i1 < 0 or i1 >= n1:
-                    break
-            else:
-                i2 += s2
-                tm2 += td2
-                idx += s2
-                if i2 < 0 or i2 >= n2:
-                    break
+            i0, i1, i2, tm0, tm1, tm2, inside = step(
+                dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+            if not inside:
+                break
+            idx = (i0 * n1 + i1) * n2 + i2
     return total, distinct, visits

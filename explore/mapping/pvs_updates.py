@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit
 
-from explore.mapping.traversal import next_axis, ray_start, voxel_entry
+from explore.mapping.traversal import next_axis, ray_start, step, voxel_entry
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -38,8 +38,6 @@ def _sensor_beam(
     no_return_clears, free_from, max_range, k_sigma, sigma_floor, l_free, l_occ, l_min, l_max,
 ):
     """One beam of :func:`update_sensor_model`; with ``marking`` only stamp its band voxels."""
-    st0 = n1 * n2
-    st1 = n2
     inv_res = 1.0 / res
     use, hit, band, free_to, t_lo, t_end, inv2s2 = beam_segment(
         d, s, marking, no_return_clears, free_from, max_range, k_sigma, sigma_floor)
@@ -80,24 +78,10 @@ def _sensor_beam(
         if t_exit >= t1:
             break
         t_in = t_exit
-        if dd == 0:
-            i0 += s0
-            tm0 += td0
-            idx += s0 * st0
-            if i0 < 0 or i0 >= n0:
-                break
-        elif dd == 1:
-            i1 += s1
-            tm1 += td1
-            idx += s1 * st1
-            if i1 < 0 or i1 >= n1:
-                break
-        else:
-            i2 += s2
-            tm2 += td2
-            idx += s2
-            if i2 < 0 or i2 >= n2:
-                break
+        i0, i1, i2, tm0, tm1, tm2, inside = step(dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+        if not inside:
+            break
+        idx = (i0 * n1 + i1) * n2 + i2
     return count
 
 
@@ -164,8 +148,6 @@ def update_octomap(
     n0, n1, n2 = grid.shape
     flat = grid.reshape(-1)
     mflat = mark.reshape(-1)
-    st0 = n1 * n2
-    st1 = n2
     inv_res = 1.0 / res
     lh = np.float32(l_hit)
     lm = np.float32(l_miss)
@@ -227,24 +209,11 @@ def update_octomap(
                     v = flat[idx] + lm
                     flat[idx] = max(v, lmin)
                     count += 1
-                if dd == 0:
-                    i0 += s0
-                    tm0 += td0
-                    idx += s0 * st0
-                    if i0 < 0 or i0 >= n0:
-                        break
-                elif dd == 1:
-                    i1 += s1
-                    tm1 += td1
-                    idx += s1 * st1
-                    if i1 < 0 or i1 >= n1:
-                        break
-                else:
-                    i2 += s2
-                    tm2 += td2
-                    idx += s2
-                    if i2 < 0 or i2 >= n2:
-                        break
+                i0, i1, i2, tm0, tm1, tm2, inside = step(
+                    dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+                if not inside:
+                    break
+                idx = (i0 * n1 + i1) * n2 + i2
         for j in range(n_occ):
             e = occ[j]
             v = flat[e] + lh

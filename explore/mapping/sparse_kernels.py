@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from explore.mapping.pvs_kernels import _entropy, serial_build
 from explore.mapping.pvs_updates import beam_segment
-from explore.mapping.traversal import next_axis, ray_start, voxel_entry
+from explore.mapping.traversal import next_axis, ray_start, step, voxel_entry
 
 SHIFT = 3  # blocks of 2^3 = 8 voxels per edge
 BLOCK = 1 << SHIFT
@@ -266,24 +266,11 @@ def _sensor_beam(
         if t_exit >= t1:
             break
         t_in = t_exit
-        if dd == 0:
-            i0 += s0
-            a0 += s0
-            tm0 += td0
-            if i0 < 0 or i0 >= ext[0]:
-                break
-        elif dd == 1:
-            i1 += s1
-            a1 += s1
-            tm1 += td1
-            if i1 < 0 or i1 >= ext[1]:
-                break
-        else:
-            i2 += s2
-            a2 += s2
-            tm2 += td2
-            if i2 < 0 or i2 >= ext[2]:
-                break
+        i0, i1, i2, tm0, tm1, tm2, inside = step(
+            dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, ext[0], ext[1], ext[2])
+        if not inside:
+            break
+        a0, a1, a2 = i0 + lat[0], i1 + lat[1], i2 + lat[2]
         key = pack(a0 >> SHIFT, a1 >> SHIFT, a2 >> SHIFT)
         if key != block:
             block = key
@@ -399,24 +386,11 @@ def update_octomap(
                     marks[row, loc] = free_tag
                     values[row, loc] = max(values[row, loc] + lm, lmin)
                     count += 1
-                if dd == 0:
-                    i0 += s0
-                    a0 += s0
-                    tm0 += td0
-                    if i0 < 0 or i0 >= ext[0]:
-                        break
-                elif dd == 1:
-                    i1 += s1
-                    a1 += s1
-                    tm1 += td1
-                    if i1 < 0 or i1 >= ext[1]:
-                        break
-                else:
-                    i2 += s2
-                    a2 += s2
-                    tm2 += td2
-                    if i2 < 0 or i2 >= ext[2]:
-                        break
+                i0, i1, i2, tm0, tm1, tm2, inside = step(
+                    dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, ext[0], ext[1], ext[2])
+                if not inside:
+                    break
+                a0, a1, a2 = i0 + lat[0], i1 + lat[1], i2 + lat[2]
                 key = pack(a0 >> SHIFT, a1 >> SHIFT, a2 >> SHIFT)
                 if key != block:
                     block = key
@@ -550,21 +524,10 @@ def cast_rays(
             if t_exit >= t1:
                 break
             t_in = t_exit
-            if dd == 0:
-                i0 += s0
-                tm0 += td0
-                if i0 < 0 or i0 >= ext[0]:
-                    break
-            elif dd == 1:
-                i1 += s1
-                tm1 += td1
-                if i1 < 0 or i1 >= ext[1]:
-                    break
-            else:
-                i2 += s2
-                tm2 += td2
-                if i2 < 0 or i2 >= ext[2]:
-                    break
+            i0, i1, i2, tm0, tm1, tm2, inside = step(
+                dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, ext[0], ext[1], ext[2])
+            if not inside:
+                break
             key = pack((i0 + lat[0]) >> SHIFT, (i1 + lat[1]) >> SHIFT, (i2 + lat[2]) >> SHIFT)
             if key != block:
                 block = key
@@ -633,21 +596,10 @@ def entropy_visited(store, lat, ext, res, origins, directions, max_ranges, min_r
                     total += last_h
             if lo >= l_stop or t_exit >= t1:
                 break
-            if dd == 0:
-                i0 += s0
-                tm0 += td0
-                if i0 < 0 or i0 >= ext[0]:
-                    break
-            elif dd == 1:
-                i1 += s1
-                tm1 += td1
-                if i1 < 0 or i1 >= ext[1]:
-                    break
-            else:
-                i2 += s2
-                tm2 += td2
-                if i2 < 0 or i2 >= ext[2]:
-                    break
+            i0, i1, i2, tm0, tm1, tm2, inside = step(
+                dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, ext[0], ext[1], ext[2])
+            if not inside:
+                break
             key = pack((i0 + lat[0]) >> SHIFT, (i1 + lat[1]) >> SHIFT, (i2 + lat[2]) >> SHIFT)
             if key != block:
                 block = key

@@ -132,6 +132,23 @@ def voxel_entry(tm0, tm1, tm2, td0, td1, td2):
     return t
 
 
+@njit(cache=True, nogil=True, inline="always")
+def step(axis, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2):
+    """Cross the voxel border on ``axis`` (:func:`next_axis`): the next voxel, the ray parameters of the
+    next borders, and whether that voxel is still in the grid."""
+    if axis == 0:
+        i0 += s0
+        tm0 += td0
+        return i0, i1, i2, tm0, tm1, tm2, 0 <= i0 < n0
+    if axis == 1:
+        i1 += s1
+        tm1 += td1
+        return i0, i1, i2, tm0, tm1, tm2, 0 <= i1 < n1
+    i2 += s2
+    tm2 += td2
+    return i0, i1, i2, tm0, tm1, tm2, 0 <= i2 < n2
+
+
 @njit(cache=True, nogil=True)
 def traverse(origin, direction, t_max, lat, res, shape):
     """Voxels (k, 3) and their ray segments (k, 2) of one ray from t = 0 to ``t_max``."""
@@ -160,19 +177,7 @@ def traverse(origin, direction, t_max, lat, res, shape):
         if t_exit >= t1:
             break
         t_in = t_exit
-        if d == 0:
-            i0 += s0
-            tm0 += td0
-            if i0 < 0 or i0 >= n0:
-                break
-        elif d == 1:
-            i1 += s1
-            tm1 += td1
-            if i1 < 0 or i1 >= n1:
-                break
-        else:
-            i2 += s2
-            tm2 += td2
-            if i2 < 0 or i2 >= n2:
-                break
+        i0, i1, i2, tm0, tm1, tm2, inside = step(d, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+        if not inside:
+            break
     return voxels[:k], segments[:k]
