@@ -14,6 +14,24 @@ INF = np.inf
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _slab(o, u, lo, hi, t0, t1, enter, axis):
+    """Clip the ray segment [t0, t1] to the slab lo <= o + t u < hi of one axis (``enter`` becomes
+    ``axis`` when the clip moves t0); False for a ray parallel to the slab outside it."""
+    if u == 0.0:
+        return not (o < lo or o >= hi), t0, t1, enter
+    a = (lo - o) / u
+    b = (hi - o) / u
+    if a > b:
+        a, b = b, a
+    if a > t0:
+        t0 = a
+        enter = axis
+    if b < t1:
+        t1 = b
+    return True, t0, t1, enter
+
+
+@njit(cache=True, nogil=True, inline="always")
 def ray_start(ox, oy, oz, ux, uy, uz, t_lo, t_hi, lat, inv_res, res, n0, n1, n2):
     """Clip the ray segment [t_lo, t_hi] to the grid box and set up the DDA.
 
@@ -24,51 +42,11 @@ def ray_start(ox, oy, oz, ux, uy, uz, t_lo, t_hi, lat, inv_res, res, n0, n1, n2)
     """
     t0 = t_lo
     t1 = t_hi
-    lo0 = lat[0] * res
-    lo1 = lat[1] * res
-    lo2 = lat[2] * res
-    hi0 = (lat[0] + n0) * res
-    hi1 = (lat[1] + n1) * res
-    hi2 = (lat[2] + n2) * res
     enter = -1
-    # slab test per axis
-    if ux != 0.0:
-        a = (lo0 - ox) / ux
-        b = (hi0 - ox) / ux
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-            enter = 0
-        if b < t1:
-            t1 = b
-    elif ox < lo0 or ox >= hi0:
-        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    if uy != 0.0:
-        a = (lo1 - oy) / uy
-        b = (hi1 - oy) / uy
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-            enter = 1
-        if b < t1:
-            t1 = b
-    elif oy < lo1 or oy >= hi1:
-        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    if uz != 0.0:
-        a = (lo2 - oz) / uz
-        b = (hi2 - oz) / uz
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-            enter = 2
-        if b < t1:
-            t1 = b
-    elif oz < lo2 or oz >= hi2:
-        return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    if not t0 < t1:
+    inside0, t0, t1, enter = _slab(ox, ux, lat[0] * res, (lat[0] + n0) * res, t0, t1, enter, 0)
+    inside1, t0, t1, enter = _slab(oy, uy, lat[1] * res, (lat[1] + n1) * res, t0, t1, enter, 1)
+    inside2, t0, t1, enter = _slab(oz, uz, lat[2] * res, (lat[2] + n2) * res, t0, t1, enter, 2)
+    if not (inside0 and inside1 and inside2 and t0 < t1):
         return (False, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     s0 = 1 if ux > 0.0 else (-1 if ux < 0.0 else 0)
     s1 = 1 if uy > 0.0 else (-1 if uy < 0.0 else 0)
