@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,25 +22,7 @@ from explore.perception import (
     vfh_signature,
 )
 
-TOUCHING_WORLD = """
-name: touching
-environment:
-  - name: table
-    source: table/table.urdf
-    position: [0.0, 0.0, 0.3125]
-objects:
-  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.18], on_top_of: table,
-     known: true}
-  - {name: block, box: [0.05, 0.07, 0.06], position: [0.127, -0.18], on_top_of: table}
-region:
-  min: [-0.45, -0.32, 0.625]
-  max: [0.45, 0.32, 0.90]
-robot:
-  plugin: free_flyer
-sensor:
-  plugin: depth_camera
-  params: {width: 320, height: 240, min_range: 0.3, max_range: 2.0}
-"""
+TOUCHING_WORLD = Path(__file__).parent / "worlds" / "touching.yaml"
 
 
 def _error_m_deg(estimate, truth) -> tuple[float, float]:
@@ -284,13 +267,11 @@ def test_stored_descriptors_are_reused(registry, scene):
     assert _error_m_deg(hypotheses[0].pose, truth["duck"])[0] < 0.005
 
 
-def test_duck_touching_a_block(open_world, tmp_path):
+def test_duck_touching_a_block(open_world):
     """Bad input: an object touching another gives one cluster; PPF still finds the duck."""
     from explore.perception import PlaneClusterSegmenter, object_frame
 
-    path = tmp_path / "touching.yaml"
-    path.write_text(TOUCHING_WORLD)
-    with open_world(str(path)) as sim:
+    with open_world(str(TOUCHING_WORLD)) as sim:
         scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
         duck = next(b for b in sim.objects() if b.name == "duck")
         truth, mesh = object_frame(duck)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -165,39 +166,14 @@ def test_touching_objects_form_one_cluster(touching_world):
         assert np.all(center[:2] >= lo[:2] - 0.01) and np.all(center[:2] <= hi[:2] + 0.01)
 
 
-TOUCHING_WORLD = """
-name: touching
-environment:
-  - name: table
-    source: table/table.urdf
-    position: [0.0, 0.0, 0.3125]
-objects:
-  - {name: duck, source: duck.obj, size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.18], on_top_of: table,
-     known: true}
-  - {name: block, box: [0.05, 0.07, 0.06], position: [0.127, -0.18], on_top_of: table}
-region:
-  min: [-0.45, -0.32, 0.625]
-  max: [0.45, 0.32, 0.90]
-robot:
-  plugin: free_flyer
-sensor:
-  plugin: depth_camera
-  params: {width: 320, height: 240, min_range: 0.3, max_range: 2.0}
-"""
-
-
-def make_touching_world(open_world, registry, folder):
-    """A duck with a block pressed against its side; overview scan and segmentation."""
-    path = folder / "touching.yaml"
-    path.write_text(TOUCHING_WORLD)
-    sim = open_world(str(path))
-    scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
-    segmenter = registry.create("segmenter", "plane_clusters", {"scale": "table"})
-    return sim, scan, segmenter.segment(scan)
+TOUCHING_WORLD = Path(__file__).parent / "worlds" / "touching.yaml"
 
 
 @pytest.fixture(scope="module")
-def touching_world(open_world, registry, tmp_path_factory):
-    sim, scan, segmentation = make_touching_world(open_world, registry, tmp_path_factory.mktemp("touching"))
-    yield sim, scan, segmentation
+def touching_world(open_world, registry):
+    """A duck with a block pressed against its side; overview scan and segmentation."""
+    sim = open_world(str(TOUCHING_WORLD))
+    scan = sim.sensor.acquire(sim, look_at([0.05, -0.9, 1.3], [0.05, -0.18, 0.65]), np.random.default_rng(0))
+    segmenter = registry.create("segmenter", "plane_clusters", {"scale": "table"})
+    yield sim, scan, segmenter.segment(scan)
     sim.close()
