@@ -138,8 +138,9 @@ def summary_line(metrics: dict[str, Any]) -> str:
             counts[row.get("result", "?")] = counts.get(row.get("result", "?"), 0) + 1
         parts = [f"objects {metrics.get('objects_explained', 0)}/{metrics['objects_total']} explained",
                  ", ".join(f"{n} {k}" for k, n in sorted(counts.items())), f"views={metrics.get('views')}"]
-        if metrics.get("collisions"):
-            parts.append(f"collisions={metrics['collisions']}")
+        for key in ("collisions", "moves_failed"):
+            if metrics.get(key):
+                parts.append(f"{key}={metrics[key]}")
         return "  ".join(p for p in parts if p)
     keys = ("scans", "coverage", "coverage_estimate", "path_length_m")
     values = {k: metrics.get(k) for k in keys if metrics.get(k) is not None}

@@ -104,3 +104,13 @@ def test_every_command_help_is_consistent() -> None:
     assert seen > 60
     scan = dict(_commands())[("scan",)]
     assert "x,y,z [m]" in scan.get_help(typer.Context(scan, info_name="explore scan"))
+
+
+def test_the_run_summary_names_contacts_and_motions_that_failed() -> None:
+    """A scene run's closing line counts what went wrong on the way, not only the objects."""
+    from explore_cli.run_cmd import summary_line
+
+    scene = {"objects_total": 2, "objects_explained": 1, "views": 9, "collisions": 0, "moves_failed": 3,
+             "objects": [{"result": "recognised"}, {"result": "unknown"}]}
+    assert summary_line(scene) == "objects 1/2 explained  1 recognised, 1 unknown  views=9  moves_failed=3"
+    assert summary_line({**scene, "collisions": 1, "moves_failed": 0}).endswith("views=9  collisions=1")
