@@ -32,6 +32,35 @@ def beam_segment(d, s, marking, no_return_clears, free_from, max_range, k_sigma,
     return use, False, 0.0, max_range, max(0.0, free_from), max_range, 0.0
 
 
+#: what :func:`voxel_update` asks of one voxel
+KEEP, STAMP, OCCUPIED, FREE = 0, 1, 2, 3
+
+
+@njit(cache=True, nogil=True, inline="always")
+def voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to, stamped):
+    """What the inverse sensor model does to the voxel a beam crosses over [t_in, t_exit] (Kriegel
+    thesis Fig. 3.10), for both layouts: ``(OCCUPIED, l)`` adds l = l_occ exp(-delta^2 / 2 s^2) for a
+    voxel within the band d +- k s of the return (delta: its distance from d; ``STAMP`` in the marking
+    pass), ``FREE`` for a voxel wholly within [free_from, free_to] that this frame did not stamp as a
+    band voxel, else ``KEEP``."""
+    if hit:
+        if d < t_in:
+            delta = t_in - d
+        elif d > t_exit:
+            delta = d - t_exit
+        else:
+            delta = 0.0
+        if delta <= band:
+            if marking:
+                return STAMP, 0.0
+            return OCCUPIED, l_occ * math.exp(-delta * delta * inv2s2)
+        if marking:
+            return KEEP, 0.0
+    if t_exit <= free_to and t_in >= free_from and not stamped:
+        return FREE, 0.0
+    return KEEP, 0.0
+
+
 @njit(cache=True, nogil=True)
 def _sensor_beam(
     flat, mflat, stamp, marking, n0, n1, n2, lat, res, origins, directions, b, d, s,
@@ -55,24 +84,14 @@ def _sensor_beam(
     while True:
         dd = next_axis(tm0, tm1, tm2)
         t_exit = tm0 if dd == 0 else (tm1 if dd == 1 else tm2)
-        if hit:
-            if d < t_in:
-                delta = t_in - d
-            elif d > t_exit:
-                delta = d - t_exit
-            else:
-                delta = 0.0
-            if delta <= band:
-                if marking:
-                    mflat[idx] = stamp
-                else:
-                    v = flat[idx] + np.float32(l_occ * math.exp(-delta * delta * inv2s2))
-                    flat[idx] = min(max(v, l_min), l_max)
-                    count += 1
-            elif not marking and t_exit <= free_to and t_in >= free_from and mflat[idx] != stamp:
-                flat[idx] = max(flat[idx] + l_free, l_min)
-                count += 1
-        elif t_exit <= free_to and t_in >= free_from and mflat[idx] != stamp:
+        kind, add = voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to,
+                                 mflat[idx] == stamp)
+        if kind == STAMP:
+            mflat[idx] = stamp
+        elif kind == OCCUPIED:
+            flat[idx] = min(max(flat[idx] + np.float32(add), l_min), l_max)
+            count += 1
+        elif kind == FREE:
             flat[idx] = max(flat[idx] + l_free, l_min)
             count += 1
         if t_exit >= t1:

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit, prange
 
 from explore.mapping.pvs_kernels import _entropy, serial_build
-from explore.mapping.pvs_updates import beam_segment
+from explore.mapping.pvs_updates import FREE, OCCUPIED, STAMP, beam_segment, voxel_update
 from explore.mapping.traversal import next_axis, ray_start, step, voxel_entry
 
 SHIFT = 3  # blocks of 2^3 = 8 voxels per edge
@@ -243,24 +243,14 @@ def _sensor_beam(
         dd = next_axis(tm0, tm1, tm2)
         t_exit = tm0 if dd == 0 else (tm1 if dd == 1 else tm2)
         loc = _local(a0, a1, a2)
-        if hit:
-            if d < t_in:
-                delta = t_in - d
-            elif d > t_exit:
-                delta = d - t_exit
-            else:
-                delta = 0.0
-            if delta <= band:
-                if marking:
-                    marks[row, loc] = tag
-                else:
-                    v = values[row, loc] + np.float32(l_occ * math.exp(-delta * delta * inv2s2))
-                    values[row, loc] = min(max(v, l_min), l_max)
-                    count += 1
-            elif not marking and t_exit <= free_to and t_in >= free_from and marks[row, loc] != tag:
-                values[row, loc] = max(values[row, loc] + l_free, l_min)
-                count += 1
-        elif t_exit <= free_to and t_in >= free_from and marks[row, loc] != tag:
+        kind, add = voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to,
+                                 marks[row, loc] == tag)
+        if kind == STAMP:
+            marks[row, loc] = tag
+        elif kind == OCCUPIED:
+            values[row, loc] = min(max(values[row, loc] + np.float32(add), l_min), l_max)
+            count += 1
+        elif kind == FREE:
             values[row, loc] = max(values[row, loc] + l_free, l_min)
             count += 1
         if t_exit >= t1:
