@@ -56,6 +56,22 @@ def _entropy(lo):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def tally(lo, last_l, last_h, h_sum, n_occ, n_unk, l_occ_from, l_free_below):
+    """Add one voxel a cast ray crosses to its sums, for both layouts: entropy (IROS 2012 Eq. 1-2; a run of
+    voxels with the same log-odds reuses the last entropy) and the occupied / unknown counts. Returns the
+    updated ``last_l, last_h, h_sum, n_occ, n_unk`` and whether the voxel is unknown."""
+    if lo != last_l:
+        last_l = lo
+        last_h = _entropy(lo)
+    h_sum += last_h
+    if lo >= l_occ_from:
+        return last_l, last_h, h_sum, n_occ + 1, n_unk, False
+    if lo >= l_free_below:
+        return last_l, last_h, h_sum, n_occ, n_unk + 1, True
+    return last_l, last_h, h_sum, n_occ, n_unk, False
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _is_free_neighbour(flat, i0, i1, i2, n0, n1, n2, l_free_below):
     """True if one of the 6 neighbours of voxel (i0, i1, i2) is free."""
     base = (i0 * n1 + i1) * n2 + i2
@@ -125,16 +141,10 @@ def cast_rays(
                 out_voxels[offsets[r] + k] = idx
             k += 1
             if t_exit > min_range:
-                if lo != last_l:
-                    last_l = lo
-                    last_h = _entropy(lo)
-                h_sum += last_h
-                if lo >= l_occ_from:
-                    n_occ += 1
-                elif lo >= l_free_below:
-                    n_unk += 1
-                    if _is_free_neighbour(flat, i0, i1, i2, n0, n1, n2, l_free_below):
-                        n_fr += 1
+                last_l, last_h, h_sum, n_occ, n_unk, is_unknown = tally(
+                    lo, last_l, last_h, h_sum, n_occ, n_unk, l_occ_from, l_free_below)
+                if is_unknown and _is_free_neighbour(flat, i0, i1, i2, n0, n1, n2, l_free_below):
+                    n_fr += 1
             if lo >= l_stop:
                 hit_t[r] = t_in
                 hit_v[r] = idx

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from explore.mapping.pvs_kernels import _entropy, serial_build
+from explore.mapping.pvs_kernels import _entropy, serial_build, tally
 from explore.mapping.pvs_updates import FREE, OCCUPIED, STAMP, beam_segment, voxel_update
 from explore.mapping.traversal import next_axis, ray_start, step, voxel_entry
 
@@ -497,16 +497,10 @@ def cast_rays(
                 out_voxels[offsets[r] + k] = idx
             k += 1
             if t_exit > min_range:
-                if lo != last_l:
-                    last_l = lo
-                    last_h = _entropy(lo)
-                h_sum += last_h
-                if lo >= l_occ_from:
-                    n_occ += 1
-                elif lo >= l_free_below:
-                    n_unk += 1
-                    if _free_neighbour(store, a0, a1, a2, lat, ext, l_free_below):
-                        n_fr += 1
+                last_l, last_h, h_sum, n_occ, n_unk, is_unknown = tally(
+                    lo, last_l, last_h, h_sum, n_occ, n_unk, l_occ_from, l_free_below)
+                if is_unknown and _free_neighbour(store, a0, a1, a2, lat, ext, l_free_below):
+                    n_fr += 1
             if lo >= l_stop:
                 hit_t[r] = t_in
                 hit_v[r] = idx
