@@ -37,12 +37,12 @@ KEEP, STAMP, OCCUPIED, FREE = 0, 1, 2, 3
 
 
 @njit(cache=True, nogil=True, inline="always")
-def voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to, stamped):
+def voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to):
     """What the inverse sensor model does to the voxel a beam crosses over [t_in, t_exit] (Kriegel
     thesis Fig. 3.10), for both layouts: ``(OCCUPIED, l)`` adds l = l_occ exp(-delta^2 / 2 s^2) for a
     voxel within the band d +- k s of the return (delta: its distance from d; ``STAMP`` in the marking
-    pass), ``FREE`` for a voxel wholly within [free_from, free_to] that this frame did not stamp as a
-    band voxel, else ``KEEP``."""
+    pass), ``FREE`` for a voxel wholly within [free_from, free_to] (the caller frees it unless this
+    frame stamped it as a band voxel), else ``KEEP``."""
     if hit:
         if d < t_in:
             delta = t_in - d
@@ -56,7 +56,7 @@ def voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, 
             return OCCUPIED, l_occ * math.exp(-delta * delta * inv2s2)
         if marking:
             return KEEP, 0.0
-    if t_exit <= free_to and t_in >= free_from and not stamped:
+    if t_exit <= free_to and t_in >= free_from:
         return FREE, 0.0
     return KEEP, 0.0
 
@@ -84,20 +84,20 @@ def _sensor_beam(
     while True:
         dd = next_axis(tm0, tm1, tm2)
         t_exit = tm0 if dd == 0 else (tm1 if dd == 1 else tm2)
-        kind, add = voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to,
-                                 mflat[idx] == stamp)
+        kind, add = voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to)
         if kind == STAMP:
             mflat[idx] = stamp
         elif kind == OCCUPIED:
             flat[idx] = min(max(flat[idx] + np.float32(add), l_min), l_max)
             count += 1
-        elif kind == FREE:
+        elif kind == FREE and mflat[idx] != stamp:
             flat[idx] = max(flat[idx] + l_free, l_min)
             count += 1
         if t_exit >= t1:
             break
         t_in = t_exit
-        i0, i1, i2, tm0, tm1, tm2, inside = step(dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+        i0, i1, i2, tm0, tm1, tm2, inside = step(
+            dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
         if not inside:
             break
         idx = (i0 * n1 + i1) * n2 + i2

@@ -243,14 +243,13 @@ def _sensor_beam(
         dd = next_axis(tm0, tm1, tm2)
         t_exit = tm0 if dd == 0 else (tm1 if dd == 1 else tm2)
         loc = _local(a0, a1, a2)
-        kind, add = voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to,
-                                 marks[row, loc] == tag)
+        kind, add = voxel_update(hit, d, t_in, t_exit, band, inv2s2, l_occ, marking, free_from, free_to)
         if kind == STAMP:
             marks[row, loc] = tag
         elif kind == OCCUPIED:
             values[row, loc] = min(max(values[row, loc] + np.float32(add), l_min), l_max)
             count += 1
-        elif kind == FREE:
+        elif kind == FREE and marks[row, loc] != tag:
             values[row, loc] = max(values[row, loc] + l_free, l_min)
             count += 1
         if t_exit >= t1:

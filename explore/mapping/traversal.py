@@ -155,7 +155,8 @@ def traverse(origin, direction, t_max, lat, res, shape):
         if t_exit >= t1:
             break
         t_in = t_exit
-        i0, i1, i2, tm0, tm1, tm2, inside = step(d, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+        i0, i1, i2, tm0, tm1, tm2, inside = step(
+            d, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
         if not inside:
             break
     return voxels[:k], segments[:k]
