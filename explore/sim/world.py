@@ -143,6 +143,11 @@ class _Fields:
             return default
         return self.data[key]
 
+    def optional(self, key: str, default: Any) -> Any:
+        """The value of an optional field; an empty one (``key:`` or ``null``) is the default too."""
+        value = self.get(key, None)
+        return default if value is None else value
+
     def vector(self, key: str, n: int | tuple[int, ...], default: Any = ...) -> Array:
         value = self.get(key, default)
         sizes = (n,) if isinstance(n, int) else n
@@ -255,12 +260,14 @@ def _body(data: Any, file: str, prefix: str, world_dir: Path, is_object: bool) -
 
 def _plugin(data: Any, file: str, key: str) -> PluginSpec:
     if isinstance(data, str):
+        if not data:
+            raise BadInput(file, key, "an empty name (leave the field out for the default)")
         return PluginSpec(data, {})
     f = _Fields(data, file, key)
     plugin = f.string("plugin")
-    params = f.get("params", {}) or {}
+    params = f.optional("params", {})
     if not isinstance(params, dict):
-        raise BadInput(file, f.where("params"), "expected a mapping")
+        raise BadInput(file, f.where("params"), f"expected a mapping, got {brief(params)}")
     base = f.vector("base", 4) if f.has("base") else None
     f.check_unknown()
     return PluginSpec(plugin, dict(params), base)
@@ -275,7 +282,7 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
     if unknown:
         raise BadInput(file, unknown[0], f"unknown field (valid: {', '.join(TOP_LEVEL_FIELDS)})")
     name = f.string("name", path.stem)
-    description = f.get("description", "") or ""
+    description = f.optional("description", "")
     if not isinstance(description, str):
         raise BadInput(file, "description", f"expected text, got {brief(description)}")
     environment = tuple(
@@ -296,7 +303,8 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
     region.check_unknown()
     if np.any(rmax <= rmin):
         raise BadInput(file, "region", "max must be greater than min on every axis")
-    robot = _plugin(f.get("robot", ""), file, "robot")  # "": the registry's default robot
+    robot_field = f.optional("robot", None)
+    robot = PluginSpec("", {}) if robot_field is None else _plugin(robot_field, file, "robot")  # "": the default
     sensor = _plugin(f.get("sensor"), file, "sensor")
     overview = None
     if f.has("overview"):
@@ -310,7 +318,7 @@ def load_world_spec(path_or_name: str | Path) -> WorldSpec:
 
 
 def _list(f: _Fields, key: str) -> list:
-    value = f.get(key, []) or []
+    value = f.optional(key, [])
     if not isinstance(value, list):
-        raise BadInput(f.source, key, "expected a list")
+        raise BadInput(f.source, key, f"expected a list, got {brief(value)}")
     return value

@@ -127,6 +127,12 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "binary_junk": ("not UTF-8 text", ""),
     "latin1_name": ("not UTF-8 text", ""),
     "description_list": ("description: expected text", [("robot:", "description: [a, b]\nrobot:")]),
+    "description_empty_list": ("description: expected text", [("robot:", "description: []\nrobot:")]),
+    "objects_zero": ("objects: expected a list", [(
+        "objects:\n  - name: bunny\n    source: bunny.obj\n    size: 0.15\n    rpy_deg: [90, 0, 0]\n"
+        "    position: [0.0, 0.0]\n    on_top_of: pedestal\n", "objects: 0\n")]),
+    "robot_empty_name": ("robot: an empty name", [("robot:\n  plugin: free_flyer", "robot: ''")]),
+    "sensor_params_zero": ("sensor.params: expected a mapping", [("plugin: laser_striper", "plugin: laser_striper\n  params: 0")]),
     "objects_empty": ("objects: no object to model", [(
         "objects:\n  - name: bunny\n    source: bunny.obj\n    size: 0.15\n    rpy_deg: [90, 0, 0]\n"
         "    position: [0.0, 0.0]\n    on_top_of: pedestal\n", "objects: []\n")]),
