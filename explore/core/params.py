@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from explore.core.errors import BadInput, brief
+from explore.core.user_files import parse_yaml
 
 # factor to the SI base of each dimension
 _UNITS: dict[str, tuple[str, float]] = {
@@ -171,8 +172,6 @@ def validate_params(
 
 def parse_assignment(text: str, option: str = "--set") -> tuple[str, Any]:
     """Parse a CLI ``key=value`` override of ``option``; the value is read as YAML (numbers, lists, ...)."""
-    from explore.core.user_files import parse_yaml
-
     if "=" not in text:
         raise BadInput(option, brief(text), "expected key=value")
     key, raw = text.split("=", 1)

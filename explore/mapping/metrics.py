@@ -22,7 +22,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from explore.core import Array, Points3, fibonacci_sphere
-from explore.sim import TriMesh
+from explore.mapping.surface import border_edges
+from explore.sim import RayCaster, TriMesh
 
 if TYPE_CHECKING:
     from explore.sim import RayCaster, Simulation
@@ -88,8 +89,6 @@ def view_sphere(
 
 def _orientation(mesh: TriMesh) -> int:
     """+1 if the mesh is closed with outward triangles, -1 if closed and inward, 0 if open."""
-    from explore.mapping.surface import border_edges
-
     if len(mesh.triangles) == 0 or len(border_edges(mesh.triangles)):
         return 0
     tris = mesh.vertices[mesh.triangles]
@@ -137,8 +136,6 @@ def observable_surface(
         if sim is not None:
             raycaster = sim.raycaster
         else:
-            from explore.sim import RayCaster
-
             raycaster = RayCaster([gt_mesh])
     if min_range is None:
         min_range = float(getattr(sensor, "min_range", 0.0))

@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import Array, Points3
+from explore.core import Array, Points3, equal_axes, plt
+from explore.mapping.octomap_bt import CENTER, DEPTH, write_bt
 from explore.mapping.pvs_grid import (
     FORMAT,
     logit,
@@ -24,8 +25,6 @@ class PVSFeatures:
 
     def save_png(self, path: str | Path, axis: int = 2, index: int | None = None, title: str = "") -> None:
         """Picture: a probability slice (black free, grey unknown, white occupied) and a 3-D view."""
-        from explore.core import equal_axes, plt  # pictures selects the Agg backend
-
         prob = 1.0 / (1.0 + np.exp(-self.log_odds.astype(np.float64)))
         occ = self.log_odds >= np.float32(logit(0.75))
         if index is None:
@@ -136,8 +135,6 @@ class PVSFeatures:
     def save_octomap(self, path: str | Path) -> int:
         """Write the observed voxels as an OctoMap binary tree (``.bt``, maximum likelihood: log-odds
         > 0 occupied, < 0 free; unobserved voxels stay unknown); returns the tree's node count."""
-        from explore.mapping.octomap_bt import CENTER, DEPTH, write_bt
-
         ijk = np.argwhere(self.log_odds != 0.0)
         keys = ijk + self.lattice + CENTER
         if len(keys) and (keys.min() < 0 or keys.max() >= 1 << DEPTH):

@@ -23,6 +23,7 @@ import numpy as np
 
 import explore.mapping.sparse_kernels as S
 from explore.core import Array, BadInput, Points3
+from explore.mapping.octomap_bt import CENTER, DEPTH, tree_of_blocks, write_tree
 from explore.mapping.pvs import PVS
 from explore.mapping.pvs_grid import FORMAT, THRESHOLDS, logit
 from explore.sim import Scan, TriMesh
@@ -276,8 +277,6 @@ class SparsePVS(PVS):
 
     # -- files -------------------------------------------------------------------------
     def save_octomap(self, path: str | Path) -> int:
-        from explore.mapping.octomap_bt import CENTER, DEPTH, tree_of_blocks, write_tree
-
         coords, rows, fill = S.blocks_of(self._store)
         coords = coords + (CENTER >> S.SHIFT)
         if len(coords) and (coords.min() < 0 or coords.max() >= 1 << (DEPTH - S.SHIFT)):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.core import Array, Points3
+from explore.core import Array, Points3, save_mesh_png
 from explore.mapping.mesh_holes import (
     edge_table,
 )
@@ -105,8 +105,6 @@ class SurfaceFeatures:
 
     def save_png(self, path: str | Path, title: str = "") -> None:
         """Shaded snapshot of the mesh."""
-        from explore.core import save_mesh_png
-
         mesh = self.mesh
         text = title or (
             f"{len(mesh.triangles)} triangles, ĉ_m = {self.coverage_area():.3f} (area), "

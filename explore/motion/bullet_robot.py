@@ -16,7 +16,7 @@ from explore.motion.collision import BulletCollider, Part
 from explore.motion.noise import STILL, truncated_normal, truncated_normal_logpdf
 from explore.motion.records import CollisionEvent, Execution, MotionPlan
 from explore.motion.robot import Robot
-from explore.sim import body_aabb, frame_pose, p
+from explore.sim import body_aabb, box_mesh, cylinder_mesh, frame_pose, p, read_mesh, sphere_mesh
 
 
 def _surface_samples(vertices: Array, triangles: np.ndarray, spacing: float) -> Points3:
@@ -116,8 +116,6 @@ class BulletRobot(Robot):
 
     def _part_point_sets(self, spacing: float) -> list[tuple[Part, Points3]]:
         """(part, points in its link frame) on every part's visual geometry and extra meshes."""
-        from explore.sim import box_mesh, cylinder_mesh, read_mesh, sphere_mesh
-
         sets = []
         for part in self.parts:
             meshes = []
@@ -455,8 +453,6 @@ class BulletRobot(Robot):
         size = np.asarray(self.sensor_size, dtype=float)
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=(size / 2).tolist(), physicsClientId=self.client)
         body = p.createMultiBody(0.0, shape, -1, physicsClientId=self.client)
-        from explore.sim import box_mesh
-
         mesh = box_mesh(size)
         return body, mesh
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from explore.sim import body_aabb
+from explore.sim import body_aabb, p
 
 
 # -- pybullet collision checking ---------------------------------------------------------------
@@ -35,8 +35,6 @@ class BulletCollider:
         self_pairs: Sequence[tuple[Part, Part]] = (),
         ignore: Sequence[tuple[Part, int]] = (),
     ) -> None:
-        from explore.sim import p
-
         self.p = p
         self.client = client
         self.parts = list(parts)
@@ -104,8 +102,6 @@ def self_collision_pairs(
     client: int, parts: Sequence[Part], adjacent: Callable[[Part, Part], bool], tolerance: float = 0.0
 ) -> list[tuple[Part, Part]]:
     """Non-adjacent part pairs that do not touch in the current (home) state."""
-    from explore.sim import p
-
     pairs = []
     for i, a in enumerate(parts):
         for b in parts[i + 1 :]:

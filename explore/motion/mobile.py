@@ -11,9 +11,11 @@ import numpy as np
 
 from explore.core import Array, Points3, wrap_angle
 from explore.motion.geometric import ompl_search, plan, seed_ompl
+from explore.motion.kernels import planar_points_clearance
 from explore.motion.planning_clock import Budget, charge
 from explore.motion.problem import MotionProblem, check_path_until, path_length
 from explore.motion.records import MotionPlan
+from explore.sim import body_aabb
 
 
 def box_distance(points: Points3, lo: np.ndarray, hi: np.ndarray) -> Array:
@@ -70,8 +72,6 @@ class PlanarChecker:
         boxes = []
         sim = getattr(robot, "sim", None)
         if sim is not None and len(points):
-            from explore.sim import body_aabb
-
             zmin, zmax = float(self.z.min()), float(self.z.max())
             for body in sim.environment_ids():
                 lo, hi = body_aabb(body, sim.client)
@@ -96,8 +96,6 @@ class PlanarChecker:
         return q
 
     def __call__(self, qb: Array) -> bool:
-        from explore.motion.kernels import planar_points_clearance
-
         charge("planar")
         qb = np.asarray(qb, dtype=float)
         if np.any(qb < self.lower - 1e-9) or np.any(qb > self.upper + 1e-9):

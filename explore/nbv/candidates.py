@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose
+from explore.mapping import first_blocked
 from explore.sim import ScanPath
 
 if TYPE_CHECKING:
@@ -394,8 +395,6 @@ def occlusion_free_share(grid: VoxelGrid, target: Pose | ScanPath, focus: Points
     the line before the last ``margin`` (default 1.5 voxels) in front of the point. Each
     focus point is tested from the sample nearest to it along the path.
     """
-    from explore.mapping import first_blocked
-
     if focus is None or len(focus) == 0:
         return 1.0
     margin = 1.5 * grid.resolution if margin is None else margin

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Array, Pose
-from explore.mapping import GroundTruthMetrics, VoxelGrid
+from explore.mapping import PVS, GroundTruthMetrics, SurfaceModel, VoxelGrid
 from explore.motion import Capability, Execution
 from explore.nbv.candidates import (
     STOP,
@@ -55,6 +55,7 @@ from explore.nbv.modelling_records import (
     resolve_strategy,
 )
 from explore.nbv.scan_planning import ScanMotion, ScanPlan, make_planner
+from explore.perception import rebase_scan, require_role, scan_points_and_normals
 from explore.sim import Scan, ScanPath
 
 
@@ -115,8 +116,6 @@ class ModellingSession(Evaluation, CandidatePlanning):
                  place_first: bool | None = None, register_scans: bool = False,
                  region: tuple[Array, Array] | None = None,
                  obstacles: Sequence[tuple[Array, Array]] = (), standoff: float | None = None) -> None:
-        from explore.mapping import PVS, SurfaceModel
-
         if region is None:
             require_an_object(sim)
         self.sim = sim
@@ -299,8 +298,6 @@ class ModellingSession(Evaluation, CandidatePlanning):
         ``max_shift``, or it turns more than ``max_angle_deg``); returns the (corrected) scan
         and the ICP result (None before there is a model).
         """
-        from explore.perception import rebase_scan, require_role, scan_points_and_normals
-
         model = self.surface.mesh
         if len(model.vertices) < 50 or not scan.hits.any():
             return scan, None

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, BadInput, Pose, validate_params, wrap_angle
+from explore.mapping import PVS, GroundTruthMetrics, VoxelGrid
 from explore.motion import Capability, Execution, MotionProblem, execute_following
 from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import PlanningContext
@@ -113,11 +114,6 @@ class NBVSSession(Reporting, Scoring, StateSampling):
                  stop_on_collision: bool = True, min_unknown: int = 30, utility_params: dict | None = None,
                  max_draws: int = 3_000_000, weighting: str = "mean", rounds: int = 3, relocalise: bool = True,
                  leg_length: float = 0.25) -> None:
-        from explore.mapping import (
-            PVS,
-            GroundTruthMetrics,  # noqa: F401 - fail early if metrics are missing
-        )
-
         if sim.sensor.geometry != "area":  # one stripe per view: nothing to plan with
             raise BadInput(str(sim.spec.path), "sensor", f"view/state planning takes single views of an area sensor "
                            f"(a depth camera); {sim.sensor.name} sweeps a line along a scan path")
@@ -174,8 +170,6 @@ class NBVSSession(Reporting, Scoring, StateSampling):
 
     # -- helpers -----------------------------------------------------------------------------
     def _snapshot(self) -> Any:
-        from explore.mapping import VoxelGrid
-
         prob = (1.0 / (1.0 + np.exp(-self.pvs.log_odds.astype(np.float64)))).astype(np.float32)
         grid = VoxelGrid(prob, np.asarray(self.pvs.origin, dtype=float), float(self.pvs.resolution))
         grid.ensure_features()
@@ -183,8 +177,6 @@ class NBVSSession(Reporting, Scoring, StateSampling):
 
     def coverage(self) -> float:
         """Ground-truth coverage c_a (tau 3 mm) of every point measured so far (metrics only)."""
-        from explore.mapping import GroundTruthMetrics
-
         if self._gt is None:
             self._gt = GroundTruthMetrics(self.sim)
         if not self.points:

@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 
+from explore.core import plt
+
 
 class Reporting:
     """Part of :class:`NBVSSession`: its summary, travel and trajectory picture."""
@@ -15,8 +17,6 @@ class Reporting:
         base), the sensor at every scan and the collisions (red crosses)."""
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch
-
-        from explore.core import plt
 
         fig, ax = plt.subplots(figsize=(6.5, 6), dpi=110)
         for body in self.sim.bodies:

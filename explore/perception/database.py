@@ -49,6 +49,7 @@ from explore.perception.database_files import (
     validate_existing,
     write_mesh_atomic,
 )
+from explore.perception.recognition import Model
 from explore.sim import TriMesh, read_mesh
 
 if TYPE_CHECKING:
@@ -403,8 +404,6 @@ class ObjectDatabase:
     # -- recognisers ---------------------------------------------------------------------
     def models(self) -> list[Model]:
         """Every object as a :class:`~explore.perception.recognition.Model` (mesh + stored descriptors)."""
-        from explore.perception.recognition import Model
-
         out = []
         for name in self.names():
             record = self.get(name)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose, pose_error, reaches
+from explore.mapping import sample_surface
 from explore.perception.colour import COLOUR_KIND, ColourSignature
 from explore.sim import Scan, TriMesh
 
@@ -107,8 +108,6 @@ def surface_distances(mesh: TriMesh, pose_a: Pose, pose_b: Pose, samples: int = 
     surface in the same place, such as a plain cube turned by 90 degrees. Point-to-mesh
     distances (Open3D ``RaycastingScene.compute_distance``), so sampling adds no error.
     """
-    from explore.mapping import sample_surface
-
     points, _ = sample_surface(mesh, max(mesh.area(), 1e-12) / samples, seed=1)
     return distance_to_model(mesh if onto is None else onto, pose_b, points @ pose_a[:3, :3].T + pose_a[:3, 3])
 

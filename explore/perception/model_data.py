@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Points3
+from explore.core import Points3, fibonacci_sphere
 from explore.perception.verification import (
     o3d_cloud,
     render_views,
@@ -38,8 +38,6 @@ class ModelCloud:
 
 def model_cloud(mesh: TriMesh, sampling: float, views: int = 24, normal_radius: float = 0.01) -> ModelCloud:
     """Union of rendered views from the whole sphere (outward normals), voxel-sampled at ``sampling``."""
-    from explore.core import fibonacci_sphere
-
     rendered = render_views(mesh, fibonacci_sphere(views), resolution=96, normal_radius=normal_radius)
     pts = np.vstack([v.points for v in rendered])
     nrm = np.vstack([v.normals for v in rendered])

@@ -13,7 +13,11 @@ from explore.perception import (
     COLOUR_KIND,
     Model,
     NameTaken,
+    PPFRecognizer,
+    VFHRecognizer,
     colour_signature,
+    model_descriptors,
+    object_frame,
 )
 from explore.scene.scene_objects import (
     RECOGNISED,
@@ -36,13 +40,9 @@ class DatabaseUpdate:
     def add_to_database(self, obj: SceneObject, world_mesh: TriMesh, scans: int) -> str:
         """Add a modelled mesh (world frame) with descriptors, provenance and location."""
         scene = self.scene
-        from explore.perception import model_descriptors, object_frame
-
         start = time.perf_counter()
         world_T_model, mesh = object_frame(world_mesh)
         name = self._new_name()
-        from explore.perception import PPFRecognizer, VFHRecognizer
-
         chosen = [scene.recognizer] if hasattr(scene.recognizer, "describe") else []  # the configured one's own
         kinds = {r.descriptor_kind for r in chosen}
         chosen += [r for r in (PPFRecognizer(), VFHRecognizer()) if r.descriptor_kind not in kinds]

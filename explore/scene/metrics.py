@@ -23,8 +23,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explore.core import Pose, kabsch, pose_error
-from explore.perception import surface_distances
+from explore.core import Pose, invert, kabsch, pose_error, transform_points
+from explore.mapping import GroundTruthMetrics, sample_surface
+from explore.perception import fuse_poses, icp_local, surface_distances
+from explore.sim import Simulation
 
 if TYPE_CHECKING:
     from explore.scene.session import SceneSession
@@ -34,8 +36,6 @@ if TYPE_CHECKING:
 @lru_cache(maxsize=8)
 def _world_bodies(world: str) -> tuple[tuple[str, np.ndarray], ...]:
     """(name, world vertices) of every object body of a world (loaded once)."""
-    from explore.sim import Simulation
-
     with Simulation(world) as sim:
         return tuple((b.name, b.mesh.vertices.copy()) for b in sim.objects())
 
@@ -84,8 +84,6 @@ def _body_of(points: np.ndarray, sim: Any, tolerance: float = 0.01) -> tuple[str
 def _true_points(session: SceneSession, cluster: Any) -> np.ndarray:
     """Where the cluster's points really are: each moved by its view's remaining pose error
     (the body an object is must not depend on how well a drifting base was localised)."""
-    from explore.core import invert, transform_points
-
     points = cluster.points.copy()
     for index in np.unique(cluster.views):
         view = session.views[int(index)]
@@ -98,8 +96,6 @@ def _in_map(session: SceneSession, obj: Any, truth: Pose) -> Pose:
     """The true pose as the robot's map has it: moved by the localisation error of the view
     that saw most of the object (so a pose error against it is the recognition's own, not the
     base's remaining drift)."""
-    from explore.core import invert
-
     ids, counts = np.unique(obj.cluster.views, return_counts=True)
     view = session.views[int(ids[np.argmax(counts)])]
     return view.recorded @ invert(view.true_pose) @ truth
@@ -126,9 +122,6 @@ def symmetry_of(mesh: TriMesh, turn: Pose, tolerance: float = SYMMETRY_TOLERANCE
     what BOP's maximum symmetry-aware surface distance (MSSD; Hodaň et al., BOP Challenge 2020,
     Sec. 2.2) measures with hand-listed symmetries; here they are found on the model itself.
     """
-    from explore.mapping import sample_surface
-    from explore.perception import icp_local
-
     points, normals = sample_surface(mesh, max(mesh.area(), 1e-12) / 3000, seed=2)
     refined = icp_local(points, normals, points, normals, init=turn, radius=0.01, iterations=40,
                         method="point_to_plane").transformation
@@ -139,16 +132,11 @@ def symmetry_of(mesh: TriMesh, turn: Pose, tolerance: float = SYMMETRY_TOLERANCE
 
 def _symmetric_errors(mesh: TriMesh, estimate: Pose, truth: Pose) -> tuple[float | None, float | None]:
     """Pose error (mm, degrees) against the nearest pose the model's symmetries make equivalent to the truth."""
-    from explore.core import invert
-
     return _errors(estimate, truth @ symmetry_of(mesh, invert(truth) @ estimate))
 
 
 def evaluate(session: SceneSession) -> dict[str, Any]:
     """metrics.json fields of a scene exploration: ``objects`` (per ground-truth object) and scene numbers."""
-    from explore.mapping import GroundTruthMetrics
-    from explore.perception import fuse_poses
-
     sim, db = session.sim, session.db
     truths: dict[str, tuple[Pose | None, str | None]] = {}
 
@@ -269,8 +257,6 @@ def pose_graph_errors(session: SceneSession) -> dict[str, float]:
     to the first view (the map frame a pose graph anchors; the first view's own odometry
     error cancels).
     """
-    from explore.core import invert
-
     views = session.views
 
     def mean_error(poses: list[Pose], truths: list[Pose]) -> tuple[float, float]:

@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose, invert, pose_error, transform_points
-from explore.motion import Capability
-from explore.scene.scene_objects import ENVIRONMENT_MARGIN
+from explore.motion import Capability, MotionPlan, MotionProblem, PlanarChecker, linear_scan_path_ik
+from explore.perception import LikelihoodField, PlanarSurface
+from explore.scene.scene_objects import ENVIRONMENT_MARGIN, environment_surface
 from explore.sim import ScanPath
 
 Target = Pose | ScanPath
@@ -63,8 +64,6 @@ def _split_drive(robot: Any, plan: Any, length: float) -> tuple[Any, Any]:
     Legs are cut by time, not distance: the base's control noise errs at every step the base
     moves (Vasquez-Gomez Sec. A6), and a turn in place drifts the heading as a drive does.
     """
-    from explore.motion import MotionPlan
-
     if plan.controls is None:
         controls, path = robot.controls_from_path(plan.path)
         plan = MotionPlan(path, controls=controls, dt=float(robot.dt), planner=plan.planner)
@@ -256,8 +255,6 @@ class Mover:
             return target, []
         robot = self.robot
         if isinstance(target, ScanPath):
-            from explore.motion import linear_scan_path_ik
-
             ik = linear_scan_path_ik(robot, target, step=0.02, rng=self.rng)
             if ik.reachable < 2 or ik.fraction < self.min_path_fraction:
                 return None
@@ -290,8 +287,6 @@ class Mover:
 
     # -- motion ----------------------------------------------------------------------------
     def _problem(self) -> Any:
-        from explore.motion import MotionProblem
-
         pvs, limit = self.pvs, self.occupied_from
         if pvs is None:
             return MotionProblem(self.robot)
@@ -382,8 +377,6 @@ class Mover:
         environment's bodies beside it (:class:`~explore.motion.PlanarChecker`; not the floor)."""
         if self.stop_margin <= 0.0:
             return True
-        from explore.motion import PlanarChecker
-
         problem = self._problem()
         checker = PlanarChecker(problem, goal, drive_margin=problem.margin + self.stop_margin)
         return checker(np.asarray(goal, dtype=float)[list(self.base_dofs)])
@@ -457,9 +450,6 @@ class Mover:
         if local is None or len(local) < 20:
             return False
         if self._field is None:
-            from explore.perception import LikelihoodField, PlanarSurface
-            from explore.scene.scene_objects import environment_surface
-
             points, normals = environment_surface(self.sim)
             self._field, self._surface = LikelihoodField(points), PlanarSurface(points, normals)
         believed = _planar(*self.believed_q[[ix, iy, ith]])

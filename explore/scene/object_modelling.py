@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import BUDGET, SUCCESS, Array
+from explore.mapping import SurfaceModel
+from explore.nbv import ModellingSession, resolve_strategy
 from explore.perception import distance_to_model
 from explore.scene.motion import target_start
 from explore.scene.scene_objects import (
@@ -51,8 +53,6 @@ class ObjectModelling:
     def start_modelling(self, obj: SceneObject) -> Any:
         """A ModellingSession over the object's box (the other objects are obstacles)."""
         scene = self.scene
-        from explore.nbv import ModellingSession, resolve_strategy
-
         lo, hi = self._model_box(obj)
         settings = scene.settings
         others = [o.box(0.005) for o in scene.objects
@@ -203,8 +203,6 @@ class ObjectModelling:
         representation, here fused into a mesh); add it to the database; its name."""
         scene = self.scene
         from scipy.spatial import cKDTree
-
-        from explore.mapping import SurfaceModel
 
         lo, hi = self._model_box(obj)
         points = obj.sample(0.001)

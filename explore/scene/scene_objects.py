@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import Array, Points3, Pose
-from explore.mapping import boundary_loops
+from explore.mapping import boundary_loops, sample_surface
 from explore.perception import (
     Cluster,
     FusedPose,
@@ -169,8 +169,6 @@ def environment_reference(sim: Any, spacing: float = 0.02, min_height: float = 0
 
 def environment_surface(sim: Any, spacing: float = 0.02, min_height: float = 0.05) -> tuple[Points3, Points3]:
     """:func:`environment_reference`'s points and their outward normals, one sample per ``spacing`` cell."""
-    from explore.mapping import sample_surface
-
     points, normals = [], []
     for body in sim.bodies:
         if body.is_object:

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, Points3
+from explore.mapping import make_pvs
 from explore.perception import (
     Cloud,
     Cluster,
@@ -56,6 +57,7 @@ from explore.perception import (
     vote_points,
 )
 from explore.scene.database_update import DatabaseUpdate
+from explore.scene.metrics import evaluate
 from explore.scene.motion import Mover
 from explore.scene.object_modelling import ObjectModelling
 from explore.scene.recognition import Recognition
@@ -147,8 +149,6 @@ class SceneSession:
     def new_pvs(self) -> Any:
         """An empty PVS over the world's region at the session's resolution, dense or sparse as the settings
         say (:func:`~explore.mapping.make_pvs`)."""
-        from explore.mapping import make_pvs
-
         return make_pvs(self.sim.spec.region_min, self.sim.spec.region_max, self.resolution,
                         layout=self.settings.pvs_layout)
 
@@ -471,6 +471,4 @@ class SceneSession:
 
     def metrics(self) -> dict[str, Any]:
         """Ground-truth evaluation (the only place that reads it): see :mod:`explore.scene.metrics`."""
-        from explore.scene.metrics import evaluate
-
         return evaluate(self)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.core import Points3, Pose
+from explore.core import Points3, Pose, captured_output
 
 
 @dataclass(frozen=True)
@@ -159,8 +159,6 @@ def read_mesh(path: str | Path) -> TriMesh:
     if path.suffix.lower() not in (".stl", ".ply"):
         raise ValueError(f"{path.name}: unsupported file type {path.suffix!r} (use .obj, .stl or .ply)")
     import open3d as o3d
-
-    from explore.core import captured_output
 
     with captured_output(stdout=True):  # Open3D's "[Open3D WARNING] Read ... failed" would come before our line
         mesh = o3d.io.read_triangle_mesh(str(path))

@@ -15,7 +15,7 @@ import numpy as np
 
 from explore.core import Array, BadInput, Points3, captured_output, pose_from, rpy_deg_to_matrix
 from explore.sim.bullet import body_visual_meshes, p
-from explore.sim.meshes import TriMesh, read_mesh
+from explore.sim.meshes import TriMesh, box_mesh, cylinder_mesh, read_mesh, sphere_mesh
 from explore.sim.world import BodySpec, WorldSpec, load_world_spec, pybullet_data_path
 
 CONTACT_GAP = 5e-4  # m between a body and the body it rests on
@@ -248,8 +248,6 @@ class Simulation:
         self.bodies.append(GroundTruthBody(body.name, body_id, world_mesh, is_object, body.known))
 
     def _primitive_or_mesh(self, body: BodySpec, where: str) -> TriMesh:
-        from explore.sim.meshes import box_mesh, cylinder_mesh, sphere_mesh
-
         if body.shape == "box":
             mesh = box_mesh(body.dims)
         elif body.shape == "cylinder":
