@@ -15,8 +15,8 @@ import numpy as np
 
 from explore.core import NO_CANDIDATES, Param
 from explore.motion import Capability
-from explore.nbv import STOP, Decision
-from explore.runtime import ExploreBehaviour, Outcome, failure, success
+from explore.nbv import STOP, Decision, ModellingSession
+from explore.runtime import ExploreBehaviour, ModellingOutputs, Outcome, failure, success
 
 
 class StartModelling(ExploreBehaviour):
@@ -53,9 +53,6 @@ class StartModelling(ExploreBehaviour):
         return name
 
     def work(self) -> Outcome:
-        from explore.nbv import ModellingSession
-        from explore.runtime import ModellingOutputs
-
         ctx = self.context
         config = ctx.config
         strategy_name = config.strategy or self.p["strategy"]

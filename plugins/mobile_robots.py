@@ -19,7 +19,7 @@ from explore.motion import (
     Part,
     self_collision_pairs,
 )
-from explore.sim import p
+from explore.sim import box_mesh, cylinder_mesh, p, sphere_mesh
 
 from .robot_parts import (
     BASE_PARAMS,
@@ -78,8 +78,6 @@ class MobileManipulator(BulletRobot):
         self.chain = ArmChain(self, self.urdf, self.flange_link, planar_pose(x, y, math.radians(yaw)) @ self.base_T_arm)
         self.dof = 3 + len(self.chain.joints)
         self.base_body = self._box_body(size)
-        from explore.sim import box_mesh
-
         self.flange_T_sensor = pose6(self.mount)
         self._housing, housing_mesh = self._sensor_housing()
         base_part = Part(self.base_body, -1, "base")
@@ -233,8 +231,6 @@ class MobileBase(BulletRobot):
 
     def attach(self, sim: Simulation) -> None:
         super().attach(sim)
-        from explore.sim import box_mesh, cylinder_mesh, sphere_mesh
-
         size = np.asarray(self.base_size, dtype=float)
         mast_len = self.camera_height - self.ground_clearance - size[2] - HEAD_HEIGHT
         mast_center = [self.mast_offset, 0.0, size[2] + mast_len / 2.0]

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from explore.core import Param
-from explore.nbv import AreaFactor
+from explore.core import Param, save_curves_png, save_points_png
+from explore.nbv import AreaFactor, NBVSSession, ViewRecord
 from explore.runtime import ExploreBehaviour, Outcome, failure, object_result, success
 
 
@@ -100,8 +100,6 @@ class TreeNBVS:
         return self.session.acquire(pose)
 
     def integrate(self, scan: Any) -> Any:
-        from explore.nbv import ViewRecord
-
         record = self._pending or ViewRecord(0, {}, 0.0, 0.0, float("nan"), None, 1.0, 0.0, 0, False, [])
         self._pending = None
         self.session.integrate(scan, record)
@@ -122,8 +120,6 @@ class TreeNBVS:
 
     def run_outputs(self, out_dir: Any) -> dict[str, Any]:
         """PVS, measured points, coverage and trajectory pictures; the NBVS metrics."""
-        from explore.core import save_curves_png, save_points_png
-
         out_dir = Path(out_dir)
         s = self.session
         summary = s.summary()
@@ -214,8 +210,6 @@ class StartNBVS(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.nbv import NBVSSession
-
         ctx = self.context
         config = ctx.config
         name = config.strategy or self.p["strategy"]

@@ -28,7 +28,7 @@ from explore.motion import (
     Part,
     self_collision_pairs,
 )
-from explore.sim import p
+from explore.sim import p, sphere_mesh
 
 from .robot_parts import (
     COMMON_PARAMS,
@@ -91,8 +91,6 @@ class FreeFlyer(BulletRobot):
             part = Part(self.body, -1, "sensor")
             self.parts = [part]
             self.collider = BulletCollider(sim.client, self.parts)
-            from explore.sim import sphere_mesh
-
             self._part_meshes = {part: [sphere_mesh(self.radius)]}
             self._sample_part_points()
 

@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, SUCCESS, Param
-from explore.perception import Q_H_MIN
+from explore.perception import Q_H_MIN, ObjectDatabase, default_path
 from explore.runtime import ExploreBehaviour, Outcome, failure, success
+from explore.scene import SceneSession, SceneSettings, known_tables, surround
 
 
 class SceneRun:
@@ -193,9 +194,6 @@ class StartScene(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        from explore.perception import ObjectDatabase, default_path
-        from explore.scene import SceneSession, SceneSettings
-
         ctx, p = self.context, self.p
         config = ctx.config
         database = ObjectDatabase.open(Path(p["db"]).expanduser() if p["db"] else default_path())
@@ -486,8 +484,6 @@ class SurroundTable(ExploreBehaviour):
     def work(self) -> Outcome:
         import math
 
-        from explore.scene import known_tables, surround
-
         run = self.need("scene")
         scene = run.session
         tables = known_tables(scene.sim)
@@ -512,8 +508,6 @@ class ListTables(ExploreBehaviour):
     writes = ("tables",)
 
     def work(self) -> Outcome:
-        from explore.scene import known_tables
-
         names = list(known_tables(_scene(self).sim))
         self.write("tables", names)
         return success(", ".join(names) or "no tables") if names else failure("the world has no tables")

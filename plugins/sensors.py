@@ -15,6 +15,7 @@ from explore.sim import (
     depth_level_spacing,
     flying_pixels,
     noise_sigma,
+    p,
     quantise_disparity,
     smooth_field,
 )
@@ -169,8 +170,6 @@ class DepthCamera(RaySensor):
         return self._render(sim, poses, flat).astype(float) @ np.array([0.299, 0.587, 0.114])
 
     def _render(self, sim: Simulation, poses: np.ndarray, lighting: dict) -> np.ndarray:
-        from explore.sim import p
-
         out = []
         fov_v = 2.0 * np.rad2deg(np.arctan((self.height / 2.0) / self.intrinsics[1, 1]))
         u, v = self._pixels
