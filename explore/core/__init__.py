@@ -5,7 +5,16 @@ outcomes, decisions with margins, determinism, SE(3) geometry, pictures.
 # The names other packages use (they import from the package, never from its modules).
 from explore.core.decisions import TIE, pick_best, reaches
 from explore.core.determinism import THREAD_VARIABLES, open3d_serial, set_threads
-from explore.core.errors import MAX_LINE, BadInput, MissionFailed, RegistryError, Terminated, brief, valid_names
+from explore.core.errors import (
+    MAX_LINE,
+    BadInput,
+    MissionFailed,
+    PluginCheckFailed,
+    RegistryError,
+    Terminated,
+    brief,
+    valid_names,
+)
 from explore.core.geometry import (
     fibonacci_sphere,
     invert,
@@ -41,6 +50,7 @@ __all__ = [
     "INTERRUPTED",
     "MAX_LINE",
     "MissionFailed",
+    "PluginCheckFailed",
     "NO_CANDIDATES",
     "OBJECT_NAME",
     "OBJECT_NAME_RULE",

@@ -54,6 +54,15 @@ class RegistryError(BadInput):
     """An unknown plugin name, or two plugins that claim the same name."""
 
 
+class PluginCheckFailed(BadInput):
+    """A plugin's own consistency check on its parameters failed (e.g. max_range below min_range);
+    ``kind`` says which plugin kind, so a caller can tell whose parameters to name."""
+
+    def __init__(self, source: str, field: str | None, message: str, kind: str) -> None:
+        self.kind = kind
+        super().__init__(source, field, message)
+
+
 class MissionFailed(ExploreError):
     """The run ended without reaching its goal; reported in the metrics (exit code 1)."""
 

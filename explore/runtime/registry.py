@@ -16,7 +16,7 @@ from typing import Any
 
 import pluggy
 
-from explore.core import BadInput, Param, RegistryError, brief, valid_names, validate_params
+from explore.core import Param, PluginCheckFailed, RegistryError, brief, valid_names, validate_params
 from explore.runtime.hookspecs import ENTRY_POINT_GROUP, PROJECT, Specs
 
 KINDS: tuple[str, ...] = (
@@ -194,7 +194,7 @@ class Registry:
         try:
             return info.factory(**values)
         except ValueError as error:  # a plugin's own consistency check on its parameters
-            raise BadInput(source, f"{field or kind} {name}", str(error)) from None
+            raise PluginCheckFailed(source, f"{field or kind} {name}", str(error), kind) from None
 
     def effective_defaults(self, info: PluginInfo) -> dict[str, Any]:
         """The parameter values a plugin gets when a run sets none. A strategy's ``*_params`` are

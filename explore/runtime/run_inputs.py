@@ -17,6 +17,7 @@ import numpy as np
 from explore.core import (
     BadInput,
     Param,
+    PluginCheckFailed,
     check_output,
     parse_assignment,
     validate_params,
@@ -148,8 +149,8 @@ def attach_plugins(sim: Any, registry: Any, chosen: dict[str, tuple[str, dict[st
     without them; keys read ``kind.key`` (``explore run``) or ``key`` (``prefixed`` False)."""
     try:
         sim.attach_plugins(registry, **chosen)
-    except BadInput as error:
-        kind = (error.field or "").split(" ")[0]
+    except PluginCheckFailed as error:
+        kind = error.kind
         given = overrides.get(kind, {})
         if not given or kind not in chosen or error.source != str(sim.spec.path):
             raise
