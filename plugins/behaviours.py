@@ -313,9 +313,10 @@ class CheckFlag(ExploreBehaviour):
         Param("key", str, "done", "", "blackboard key (in the run's namespace)"),
         Param("expect", bool, True, "", "value that makes the condition succeed"),
     )
+    key_params = ("key",)
 
     def setup(self, **kwargs: Any) -> None:
-        self.reads = (self.p["key"],)
+        self.reads = tuple(self.p[name] for name in self.key_params)
         super().setup(**kwargs)
 
     def work(self) -> Outcome:

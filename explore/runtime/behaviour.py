@@ -50,6 +50,9 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
     params: tuple = ()
     reads: tuple[str, ...] = ()
     writes: tuple[str, ...] = ()
+    #: parameters whose value names a blackboard key the behaviour reads (a tree file is refused
+    #: when no behaviour of it writes that key: a misspelt flag would never be set)
+    key_params: tuple[str, ...] = ()
     blocking = False
     is_condition = False  # a condition's FAILURE is an answer, not an error: not traced as failure
 

@@ -210,8 +210,10 @@ def _parse(data: Any, file: str, where: str, registry: Any, stack: tuple[Path, .
 
 
 def _check_blackboard_keys(root: Node, registry: Any) -> None:
-    """Every key a loop reads (``until``, ``items``) must be written by a behaviour of the tree or
-    a ``for_each``'s ``as``: a misspelt flag would otherwise loop until its budget runs out.
+    """Every key a loop reads (``until``, ``items``) or a behaviour names in a parameter
+    (``key_params``, e.g. ``check_flag``'s ``key``) must be written by a behaviour of the tree or a
+    ``for_each``'s ``as``: a misspelt flag would otherwise loop until its budget runs out, or a
+    condition would never be met.
 
     Checked only when every behaviour declares what it writes (``writes`` of the base class);
     a behaviour that registers blackboard keys on its own could write anything.
@@ -226,10 +228,15 @@ def _check_blackboard_keys(root: Node, registry: Any) -> None:
         elif node.type == "for_each":
             written.add(node.attrs["as"])
     for node in root.walk():
-        for key in ("until", "items"):
-            if key in node.attrs and node.attrs[key] not in written:
-                raise BadInput(node.source, f"{node.path}.{key}", f"no behaviour of the tree writes "
-                               f"{brief(node.attrs[key])} (written: {', '.join(sorted(written)) or 'nothing'})")
+        if node.type == "behaviour":
+            factory = registry.get("behaviour", node.behaviour).factory
+            read = {f"params.{name}": node.params[name] for name in factory.key_params}
+        else:
+            read = {key: node.attrs[key] for key in ("until", "items") if key in node.attrs}
+        for where, key in read.items():
+            if key not in written:
+                raise BadInput(node.source, f"{node.path}.{where}", f"no behaviour of the tree writes "
+                               f"{brief(key)} (written: {', '.join(sorted(written)) or 'nothing'})")
 
 
 def _check_values(kind: str, attrs: dict[str, Any], file: str, where: str) -> None:
@@ -239,6 +246,9 @@ def _check_values(kind: str, attrs: dict[str, Any], file: str, where: str) -> No
         raise BadInput(file, f"{where}.on_max", "expected success or failure")
     if kind == "one_shot" and attrs.get("on", "completion") not in ("completion", "success"):
         raise BadInput(file, f"{where}.on", "expected completion or success")
+    for key in ("until", "items", "as"):
+        if key in attrs and not attrs[key].strip():
+            raise BadInput(file, f"{where}.{key}", "an empty blackboard key")
     for key in ("attempts", "times", "max_iterations", "seconds"):
         if key in attrs and not (math.isfinite(attrs[key]) and attrs[key] > 0):
             raise BadInput(file, f"{where}.{key}", f"must be a positive finite number, got {attrs[key]}")
