@@ -54,7 +54,7 @@ class Move:
     planner: str
 
 
-STOP_SIGMAS = 2.0  # a noisy base stops this many sigma of its drive's error clear (Mover.stop_margin)
+STOP_SIGMAS = 2.0  # a noisy base stops this many sigma of its last leg's heading swing clear (Mover.stop_margin)
 
 
 def _split_drive(robot: Any, plan: Any, length: float) -> tuple[Any, Any]:
@@ -206,7 +206,7 @@ class Mover:
         self._odometry_var = np.zeros(2)  # (translation m^2, rotation rad^2) since the last view
         self._drift_var = np.zeros(2)  # the same since the belief was last localised
         self._laser_rng = np.random.default_rng([seed, 1])
-        self._stop_radius: float | None = None  # the base's outermost point from its centre (stop_margin)
+        self._stop_margin: float | None = None
         self._occupied: OccupiedClearance | None = None  # the PVS's occupied voxels, for planning
         self._field: Any = None  # likelihood field of the known environment, built on first use
         self._surface: Any = None  # its surface samples and normals (a PlanarSurface), with the field
@@ -348,46 +348,37 @@ class Mover:
             true_target = ScanPath(true_start, end, target.speed)
         return Move(true_target, believed, travel, planning_s, self.collisions - before, getattr(plan, "planner", ""))
 
-    def stop_margin(self, goal: Array | None = None) -> float:
-        """How much farther than its clearance a noisy base keeps its ``goal`` from the known
-        environment (:meth:`reach`): ``STOP_SIGMAS`` sigma of how far the heading error of its last
-        stretch of driving swings the robot's outermost point about its base, and for a base that
-        drives open loop (no legs) also how far that error moves the base sideways. The heading errs
-        sigma_omega dt at each of the n steps (Vasquez-Gomez Sec. A6), sigma_omega dt sqrt(n) at the
-        end; sideways a drive of length L drifts L sigma_omega dt sqrt(n / 3) (the integral of that
-        random walk). The last stretch is at most 1.5 legs (:func:`_split_drive`) for a base that
-        drives in legs, the whole drive from where the base believes it is to ``goal`` otherwise.
-        The scene patrols' contacts came in the last steps of a drive, at goals 1-2 cm from a
-        table. 0 without noise."""
-        if not self.noise or not self.base_dofs:
-            return 0.0
-        leg = float(self.robot.replan_distance)
-        if leg <= 0.0 and goal is None:
-            return 0.0
-        robot = self.robot
-        ix, iy, _ = self.base_dofs
-        if self._stop_radius is None:
-            q = np.asarray(robot.q, dtype=float)
-            points = robot.link_points(q)
-            self._stop_radius = float(np.hypot(points[:, 0] - q[ix], points[:, 1] - q[iy]).max(initial=0.0))
-        speed = float(robot.base_control_limits()[0])
-        step_sigma = float(robot.control_sigma()[robot.n_base_controls - 1]) * float(robot.dt)
-        if leg > 0.0:
-            steps = 1.5 * math.ceil(leg / (speed * float(robot.dt)))
-            return STOP_SIGMAS * step_sigma * math.sqrt(steps) * self._stop_radius
-        drive = float(np.hypot(goal[ix] - self.believed_q[ix], goal[iy] - self.believed_q[iy]))
-        steps = max(math.ceil(drive / (speed * float(robot.dt))), 1)
-        heading = step_sigma * math.sqrt(steps)
-        return STOP_SIGMAS * heading * (self._stop_radius + drive / math.sqrt(3.0))
+    @property
+    def stop_margin(self) -> float:
+        """How much farther than its clearance a noisy base that drives in legs keeps its goal from
+        the known environment (:meth:`reach`): ``STOP_SIGMAS`` sigma of how far the heading error
+        of a last leg (at most 1.5 legs, :func:`_split_drive`) swings the robot's outermost point
+        about its base. The heading errs sigma_omega dt at each of the leg's n steps (Vasquez-Gomez
+        Sec. A6), sigma_omega dt sqrt(n) at its end. The scene patrols' contacts came in the last
+        steps of a last leg, at goals 1-2 cm from a table. 0 without noise or legs (an open-loop
+        base's error has no such bound)."""
+        if self._stop_margin is None:
+            self._stop_margin = 0.0
+            leg = float(self.robot.replan_distance) if self.base_dofs else 0.0
+            if self.noise and leg > 0.0:
+                robot = self.robot
+                speed = float(robot.base_control_limits()[0])
+                steps = 1.5 * math.ceil(leg / (speed * float(robot.dt)))
+                heading = float(robot.control_sigma()[robot.n_base_controls - 1]) * float(robot.dt) * math.sqrt(steps)
+                ix, iy, _ = self.base_dofs
+                q = np.asarray(robot.q, dtype=float)
+                points = robot.link_points(q)
+                radius = float(np.hypot(points[:, 0] - q[ix], points[:, 1] - q[iy]).max(initial=0.0))
+                self._stop_margin = STOP_SIGMAS * heading * radius
+        return self._stop_margin
 
     def _room_to_stop(self, goal: Array) -> bool:
-        """The base at ``goal`` keeps its clearance plus :meth:`stop_margin` from the known
+        """The base at ``goal`` keeps its clearance plus :attr:`stop_margin` from the known
         environment's bodies beside it (:class:`~explore.motion.PlanarChecker`; not the floor)."""
-        margin = self.stop_margin(goal)
-        if margin <= 0.0:
+        if self.stop_margin <= 0.0:
             return True
         problem = self._problem()
-        checker = PlanarChecker(problem, goal, drive_margin=problem.margin + margin)
+        checker = PlanarChecker(problem, goal, drive_margin=problem.margin + self.stop_margin)
         return checker(np.asarray(goal, dtype=float)[list(self.base_dofs)])
 
     def _valid_sweep(self, problem: Any, target: ScanPath, sweep: Array) -> tuple[ScanPath, Array] | None:
