@@ -43,7 +43,11 @@ class MissingInput(Exception):
 
 
 class ExploreBehaviour(py_trees.behaviour.Behaviour):
-    """Base of explore's behaviour plugins (kind ``behaviour``)."""
+    """Base of explore's behaviour plugins (kind ``behaviour``).
+
+    A subclass declares the blackboard keys it ``reads`` and ``writes`` and, in ``key_params``, the
+    parameters whose value names a key it reads (``check_flag``'s ``key``): a tree file whose loops
+    or such parameters read a key no behaviour of it writes is refused when it loads."""
 
     kind = "behaviour"
     name = "behaviour"  # registered name (instances get their display name from the tree)
