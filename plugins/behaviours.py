@@ -315,10 +315,6 @@ class CheckFlag(ExploreBehaviour):
     )
     key_params = ("key",)
 
-    def setup(self, **kwargs: Any) -> None:
-        self.reads = tuple(self.p[name] for name in self.key_params)
-        super().setup(**kwargs)
-
     def work(self) -> Outcome:
         value = bool(self.read(self.p["key"], False))
         if value == self.p["expect"]:

@@ -70,10 +70,11 @@ class ExploreBehaviour(py_trees.behaviour.Behaviour):
 
     # -- lifecycle -------------------------------------------------------------------------
     def setup(self, **kwargs: Any) -> None:
-        """Receive the run context and register the declared blackboard keys."""
+        """Receive the run context and register the declared blackboard keys (``reads``, the keys
+        named by ``key_params``, ``writes``)."""
         self.context = kwargs["context"]
         self.bb = self.attach_blackboard_client(name=self.name, namespace=self.context.namespace)
-        for key in self.reads:
+        for key in (*self.reads, *(self.p[name] for name in self.key_params)):
             self.bb.register_key(key, access=Access.READ)
         for key in self.writes:
             self.bb.register_key(key, access=Access.WRITE)

@@ -219,24 +219,22 @@ def _check_blackboard_keys(root: Node, registry: Any) -> None:
     a behaviour that registers blackboard keys on its own could write anything.
     """
     written: set[str] = set()
+    read: list[tuple[Node, str, str]] = []  # (node, where in it, key)
     for node in root.walk():
         if node.type == "behaviour":
             factory = registry.get("behaviour", node.behaviour).factory
             if not (isinstance(factory, type) and issubclass(factory, ExploreBehaviour)):
                 return
             written.update(factory.writes)
-        elif node.type == "for_each":
-            written.add(node.attrs["as"])
-    for node in root.walk():
-        if node.type == "behaviour":
-            factory = registry.get("behaviour", node.behaviour).factory
-            read = {f"params.{name}": node.params[name] for name in factory.key_params}
+            read += [(node, f"params.{name}", node.params[name]) for name in factory.key_params]
         else:
-            read = {key: node.attrs[key] for key in ("until", "items") if key in node.attrs}
-        for where, key in read.items():
-            if key not in written:
-                raise BadInput(node.source, f"{node.path}.{where}", f"no behaviour of the tree writes "
-                               f"{brief(key)} (written: {', '.join(sorted(written)) or 'nothing'})")
+            if node.type == "for_each":
+                written.add(node.attrs["as"])
+            read += [(node, key, node.attrs[key]) for key in ("until", "items") if key in node.attrs]
+    for node, where, key in read:
+        if key not in written:
+            raise BadInput(node.source, f"{node.path}.{where}", f"no behaviour of the tree writes "
+                           f"{brief(key)} (written: {', '.join(sorted(written)) or 'nothing'})")
 
 
 def _check_values(kind: str, attrs: dict[str, Any], file: str, where: str) -> None:
