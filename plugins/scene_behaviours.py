@@ -10,6 +10,7 @@ Thin adapters over :class:`explore.scene.session.SceneSession`: the session live
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -482,8 +483,6 @@ class SurroundTable(ExploreBehaviour):
     )
 
     def work(self) -> Outcome:
-        import math
-
         run = self.need("scene")
         scene = run.session
         tables = known_tables(scene.sim)
