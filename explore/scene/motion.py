@@ -178,9 +178,10 @@ class Mover:
     refine_localisation : refine each correlative laser match by point-to-plane ICP on the known
         surfaces (:class:`~explore.perception.PlanarSurface`)
     min_obstacle_height : a driving robot's PVS test ignores voxels lower than this above the floor
-        (world z = 0), as costmap_2d's ``min_obstacle_height`` does: a depth camera's noise at room range
-        (Kinect sigma 3.5 cm at 3.5 m) leaves occupied voxels 1-3 cm up the floor, which held the base
-        of ``room40`` where it stood; the known floor itself is tested exactly by the collision checker
+        (world z = 0), as costmap_2d's ``min_obstacle_height`` does: a depth camera's noise at room
+        range (Kinect sigma 1.7 cm at 3.5 m, with its per-frame bias) leaves occupied voxels 1-3 cm up
+        the floor, which held the base of ``room40`` where it stood; the known floor itself is tested
+        exactly by the collision checker
     """
 
     def __init__(self, sim: Any, registry: Any, planner: str | None = None, noise: bool = True,
