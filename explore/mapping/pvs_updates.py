@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit
 
-from explore.mapping.traversal import next_axis, ray_start, step, voxel_entry
+from explore.mapping.traversal import next_axis, ray_start, step_flat, voxel_entry
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -80,6 +80,7 @@ def _sensor_beam(
         return 0
     count = 0
     idx = (i0 * n1 + i1) * n2 + i2
+    jump0, jump1 = s0 * n1 * n2, s1 * n2  # the flat index's step along axes 0, 1
     t_in = voxel_entry(tm0, tm1, tm2, td0, td1, td2)
     while True:
         dd = next_axis(tm0, tm1, tm2)
@@ -96,11 +97,10 @@ def _sensor_beam(
         if t_exit >= t1:
             break
         t_in = t_exit
-        i0, i1, i2, tm0, tm1, tm2, inside = step(
-            dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+        i0, i1, i2, idx, tm0, tm1, tm2, inside = step_flat(
+            dd, i0, i1, i2, idx, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, jump0, jump1, n0, n1, n2)
         if not inside:
             break
-        idx = (i0 * n1 + i1) * n2 + i2
     return count
 
 
@@ -215,6 +215,7 @@ def update_octomap(
             if not ok:
                 continue
             idx = (i0 * n1 + i1) * n2 + i2
+            jump0, jump1 = s0 * n1 * n2, s1 * n2  # the flat index's step along axes 0, 1
             while True:
                 if idx == end:
                     break
@@ -228,11 +229,10 @@ def update_octomap(
                     v = flat[idx] + lm
                     flat[idx] = max(v, lmin)
                     count += 1
-                i0, i1, i2, tm0, tm1, tm2, inside = step(
-                    dd, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
+                i0, i1, i2, idx, tm0, tm1, tm2, inside = step_flat(
+                    dd, i0, i1, i2, idx, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, jump0, jump1, n0, n1, n2)
                 if not inside:
                     break
-                idx = (i0 * n1 + i1) * n2 + i2
         for j in range(n_occ):
             e = occ[j]
             v = flat[e] + lh

@@ -127,6 +127,26 @@ def step(axis, i0, i1, i2, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, n0, n1, n2)
     return i0, i1, i2, tm0, tm1, tm2, 0 <= i2 < n2
 
 
+@njit(cache=True, nogil=True, inline="always")
+def step_flat(axis, i0, i1, i2, idx, tm0, tm1, tm2, s0, s1, s2, td0, td1, td2, jump0, jump1, n0, n1, n2):
+    """:func:`step` that also carries a dense grid's flat index ``idx`` (``jump0``, ``jump1``: its step
+    along axes 0 and 1, ``s0 * n1 * n2`` and ``s1 * n2``): one add per voxel instead of recomputing the
+    index. The dense updates use it (``benchmarks/pvs_vs_octomap.py``: OctoMap mode 1.5 -> 2.0 M beams/s
+    on the bunny at 5 mm, the sensor model 1.8 -> 2.0 M); the ray casts do not, where it measured
+    15 % slower (``cast_rays`` also needs the voxel's own indices)."""
+    if axis == 0:
+        i0 += s0
+        tm0 += td0
+        return i0, i1, i2, idx + jump0, tm0, tm1, tm2, 0 <= i0 < n0
+    if axis == 1:
+        i1 += s1
+        tm1 += td1
+        return i0, i1, i2, idx + jump1, tm0, tm1, tm2, 0 <= i1 < n1
+    i2 += s2
+    tm2 += td2
+    return i0, i1, i2, idx + s2, tm0, tm1, tm2, 0 <= i2 < n2
+
+
 @njit(cache=True, nogil=True)
 def traverse(origin, direction, t_max, lat, res, shape):
     """Voxels (k, 3) and their ray segments (k, 2) of one ray from t = 0 to ``t_max``."""
