@@ -31,7 +31,7 @@ import numpy as np
 from explore.core import Array, Points3, Pose, invert, pose_error, transform_points
 from explore.motion import Capability, MotionPlan, MotionProblem, PlanarChecker, linear_scan_path_ik
 from explore.perception import LikelihoodField, PlanarSurface
-from explore.scene.scene_objects import ENVIRONMENT_MARGIN, environment_surface
+from explore.scene.scene_objects import ENVIRONMENT_MARGIN, FLOOR, environment_surface
 from explore.sim import ScanPath
 
 Target = Pose | ScanPath
@@ -178,7 +178,7 @@ class Mover:
     refine_localisation : refine each correlative laser match by point-to-plane ICP on the known
         surfaces (:class:`~explore.perception.PlanarSurface`)
     min_obstacle_height : a driving robot's PVS test ignores voxels lower than this above the floor
-        (world z = 0), as costmap_2d's ``min_obstacle_height`` does: a depth camera's noise at room
+        (``FLOOR``), as costmap_2d's ``min_obstacle_height`` does: a depth camera's noise at room
         range (Kinect sigma 1.7 cm at 3.5 m, with its per-frame bias) leaves occupied voxels 1-3 cm up
         the floor, which held the base of ``room40`` where it stood; the known floor itself is tested
         exactly by the collision checker
@@ -302,10 +302,10 @@ class Mover:
             # a driving robot: each of its points only outside occupied voxels. At room scale the PVS
             # holds stray occupied voxels from depth noise of centimetres at 3 m, and keeping the
             # margin from them cost room40 (seed 0) 18 of its 42 views and two known objects' accuracy
-            floor = self.min_obstacle_height
+            normal, offset, low = np.asarray(FLOOR[:3]), FLOOR[3], self.min_obstacle_height
 
             def space_free(points: Points3) -> np.ndarray:
-                return pvs.probability_below(points, limit) | (points[:, 2] < floor)
+                return pvs.probability_below(points, limit) | (points @ normal + offset < low)
 
             return MotionProblem(self.robot, space_free=space_free, space_bounds=bounds)
         if self._occupied is None or self._occupied.pvs is not pvs:
