@@ -223,6 +223,9 @@ class LaserStriper(RaySensor):
         Param("baseline", float, 0.08, "m", "laser to camera distance along the sweep (the sensor's y axis)",
               low=1e-4),
         Param("camera_shadow", bool, False, "", "no return where the camera does not see the laser line"),
+        Param("clear_where_seen", bool, True, "",
+              "with camera_shadow: a beam without a return frees the part of its depth of field the camera sees "
+              "(a surface there would have returned)"),
         Param("speckle_sigma", float, 0.0, "", "speckle noise along the stripe, in units of sigma(d)", low=0.0),
         Param("speckle_beams", float, 2.0, "", "correlation length of the speckle along the stripe (beams)",
               low=0.1, high=10000.0),

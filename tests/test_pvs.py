@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -179,6 +180,40 @@ def test_no_return_semantics_camera_vs_striper(registry, kind: str) -> None:
     quiet.integrate(make_scan(origin, [1.0, 0.0, 0.0], [np.nan], max_range=sensor.max_range,
                               no_return_clears=False))
     assert not quiet.log_odds.any()
+
+
+def seen_miss_scan(camera_blocked: bool) -> tuple[PVS, Scan]:
+    """A striper beam along +x without a return (working range 0.15-0.5 m), its camera 8 cm along y; with
+    ``camera_blocked`` an occupied wall (y = 1-2 cm, x from 0.25 m on) stands between the camera and the beam's
+    far part: the camera's sight of the beam meets it from x = 0.25 / 0.875 = 0.286 m on."""
+    pvs = PVS([0.0, -0.02, -0.02], [0.6, 0.12, 0.02], RES)
+    if camera_blocked:
+        lo, hi = pvs.index(np.array([[0.25, 0.015, -0.01], [0.6, 0.015, 0.01]]))[0]
+        pvs.log_odds[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1] = logit(0.97)
+    scan = make_scan([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [np.nan], min_range=0.15, max_range=0.5,
+                     clear_from_origin=False, no_return_clears=False)
+    return pvs, dataclasses.replace(scan, seen_from=np.array([0.0, 0.08, 0.0]))
+
+
+def test_a_missing_return_frees_only_what_the_striper_camera_saw() -> None:
+    """A surface on the laser's path where the camera sees it would have returned (PVS._seen_misses)."""
+    pvs, scan = seen_miss_scan(camera_blocked=False)
+    pvs.integrate(scan)
+    line = pvs.log_odds[:, 2, 2]  # y = z = 0: the beam's voxels
+    assert np.all(line[:15] == 0.0)  # nothing below the minimum range
+    assert np.allclose(line[16:49], logit(0.4))  # one miss each up to the end of the working range
+    assert np.all(line[51:] == 0.0)
+    # a wall hides the beam beyond x = 0.286 m from the camera: a surface there could have been lost
+    pvs, scan = seen_miss_scan(camera_blocked=True)
+    pvs.integrate(scan)
+    line = pvs.log_odds[:, 2, 2]
+    assert np.flatnonzero(line < 0.0).tolist() == list(range(15, 28))
+    # without the camera's evidence (or in OctoMap mode) a missing return frees nothing, as before
+    quiet = PVS([0.0, -0.02, -0.02], [0.6, 0.12, 0.02], RES)
+    quiet.integrate(dataclasses.replace(scan, seen_from=None))
+    octomap = PVS([0.0, -0.02, -0.02], [0.6, 0.12, 0.02], RES, mode="octomap")
+    octomap.integrate(seen_miss_scan(camera_blocked=False)[1])
+    assert not quiet.log_odds.any() and not octomap.log_odds.any()
 
 
 def brute_force_voxels(pvs: PVS, origin: np.ndarray, direction: np.ndarray, length: float) -> set:

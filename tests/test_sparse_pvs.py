@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_pvs import bayes, make_scan
@@ -24,6 +26,25 @@ def bunny_scans(open_world):  # noqa: ANN001, ANN201
                  for offset in ([0.3, -0.1, 0.1], [-0.2, 0.22, 0.15], [0.05, -0.3, 0.2])]
     origins = np.vstack([s.origins for s in scans])
     return scans, np.minimum(origins.min(axis=0), CENTRE - 0.15) - 0.02, np.maximum(origins.max(axis=0), CENTRE + 0.15)
+
+
+def test_the_striper_camera_frees_the_same_voxels_in_both_layouts(open_world) -> None:  # noqa: ANN001
+    """Triangulation scans: a missing return frees what the camera saw (PVS._seen_misses), the same in both."""
+    with open_world("bunny_pedestal", profile="triangulation") as sim:
+        rng = np.random.default_rng(3)
+        scans = [sim.sensor.acquire(sim, target_for(sim.sensor, CENTRE + offset, CENTRE, 0.12), rng)
+                 for offset in ([0.3, -0.1, 0.1], [-0.2, 0.22, 0.15])]
+    assert all(scan.seen_from is not None and not scan.no_return_clears for scan in scans)
+    lo, hi = CENTRE - 0.15, CENTRE + 0.15
+    dense, sparse, blind = PVS(lo, hi, 0.005), SparsePVS(lo, hi, 0.005), PVS(lo, hi, 0.005)
+    for scan in scans:
+        assert dense.integrate(scan) == sparse.integrate(scan)
+        blind.integrate(dataclasses.replace(scan, seen_from=None))
+    assert np.array_equal(sparse.window(lo, hi).log_odds, dense.log_odds)
+    free, blind_free = dense.counts()["free"], blind.counts()["free"]
+    assert free > 2 * blind_free  # the air beside the bunny, which no return crosses, is no longer unknown
+    occupied, blind_occupied = dense.counts()["occupied"], blind.counts()["occupied"]
+    assert blind_occupied > 1500 and 0.995 * blind_occupied <= occupied <= blind_occupied  # the surface kept
 
 
 @pytest.mark.parametrize("mode", ["sensor_model", "octomap"])

@@ -11,7 +11,8 @@ update, voxels whose ray segment comes within k*sigma of d get an occupied updat
 exp(-delta^2 / 2 sigma^2), and voxels behind get nothing. The free part starts at the beam
 origin only if the sensor says so (``Scan.clear_from_origin``); for a triangulation laser
 striper a return only proves [min_range, d - k*sigma] free. A beam without a return frees the
-working range if ``Scan.no_return_clears`` (from the origin or from min_range, as above).
+working range if ``Scan.no_return_clears`` (from the origin or from min_range, as above); else, with
+``Scan.seen_from`` (a striper's camera), the part of it the camera saw (``PVS._seen_misses``).
 ``mode="octomap"`` instead reproduces OctoMap's ``insertPointCloud`` cell by cell (constant
 hit 0.7 / miss 0.4, clamping 0.12-0.97, one update per cell and cloud, occupied wins).
 
@@ -57,6 +58,13 @@ from explore.mapping.pvs_updates import update_octomap, update_sensor_model
 from explore.sim import Scan
 
 """State codes returned by :meth:`PVS.state`."""
+
+
+#: a voxel at least this likely occupied holds surface a scan saw (one return's weak update suffices)
+SEEN_SURFACE = 0.55
+#: key offsets of a voxel's 27-neighbourhood (itself included) under ``PVS._keys``
+NEIGHBOURS = (np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+              @ np.array([1 << 42, 1 << 21, 1], dtype=np.int64))
 
 
 class PVS(PVSFeatures, PVSQueries):
@@ -258,6 +266,8 @@ class PVS(PVSFeatures, PVSQueries):
             sigmas, frames = sigmas[order], frames[order]
         _, first = np.unique(frames, return_index=True)
         starts = np.append(first, len(frames)).astype(np.int64)
+        if scan.seen_from is not None and not scan.no_return_clears and self.mode == "sensor_model":
+            ranges = self._seen_misses(scan, origins, directions, ranges, frames)
         updates = self._apply(scan, origins, directions, ranges, sigmas, starts)
         self._touch()
         hits = int(np.isfinite(ranges).sum())
@@ -269,6 +279,66 @@ class PVS(PVSFeatures, PVSQueries):
             "no_returns": int(len(ranges) - hits),
             "voxel_updates": int(updates),
         }
+
+    def _seen_misses(self, scan: Scan, origins: Points3, directions: Points3, ranges: Array,
+                     frames: np.ndarray) -> Array:
+        """``ranges`` with each beam without a return that the sensor's second viewpoint (``scan.seen_from``, the
+        camera of a laser striper) saw into set to -t: the beam is free from the working range's start to t.
+
+        A surface in the laser's path where the camera sees it would have returned, so the missing return
+        proves free every voxel along the beam up to the first one the camera cannot see (its line of sight
+        meets a voxel the PVS holds occupied) or the laser cannot reach (an occupied voxel on the beam: there
+        the return was lost, not absent). Points a voxel apart along the beam inside the box are tested, those
+        in voxels not yet known free.
+        """
+        miss = np.flatnonzero(np.isnan(ranges))
+        if not len(miss):
+            return ranges
+        o, d = origins[miss], directions[miss]
+        t_lo = np.full(len(miss), float(scan.min_range) if not scan.clear_from_origin else 0.0)
+        t_hi = np.full(len(miss), float(scan.max_range))
+        with np.errstate(divide="ignore", invalid="ignore"):  # the beam's part inside the box (slab test)
+            a = (self.min_corner - o) / d
+            b = (self.max_corner - o) / d
+            t_lo = np.maximum(t_lo, np.nanmax(np.minimum(a, b), axis=1))
+            t_hi = np.minimum(t_hi, np.nanmin(np.maximum(a, b), axis=1))
+        step = self.resolution
+        t_hi = np.minimum(t_hi, self.cast(o, d, t_hi.clip(min=0.0), stop_p=SEEN_SURFACE).hit_distance - step)
+        count = (np.floor(np.clip(t_hi - t_lo, 0.0, None) / step)).astype(np.int64)
+        beam = np.repeat(np.arange(len(miss)), count)
+        if not len(beam):
+            return ranges
+        k = np.arange(len(beam)) - np.repeat(np.cumsum(count) - count, count)
+        t = t_lo[beam] + (k + 0.5) * step
+        points = o[beam] + t[:, None] * d[beam]
+        # the return of a surface this scan saw elsewhere may have been lost here (grazing incidence): stop there
+        hits = np.isfinite(ranges)
+        returned = self._keys(origins[hits] + ranges[hits, None] * directions[hits])
+        returned = np.unique((returned[:, None] + NEIGHBOURS[None, :]).ravel())  # with the occupied band around
+        lost = np.isin(self._keys(points), returned)
+        first_lost = np.full(len(miss), np.inf)
+        np.minimum.at(first_lost, beam[lost], t[lost])
+        free, occupied_from = THRESHOLDS["validation"]
+        test = (self.probability(points) >= free) & (t < first_lost[beam])  # known free: no surface, seen or not
+        beam, t, points = beam[test], t[test], points[test]
+        poses = scan.sensor_poses[frames[miss[beam]]]
+        cameras = poses[:, :3, 3] + np.einsum("nij,j->ni", poses[:, :3, :3], np.asarray(scan.seen_from, dtype=float))
+        sight = points - cameras
+        distance = np.linalg.norm(sight, axis=1)
+        reach = (distance - 1.5 * step).clip(min=0.0)
+        blocked = np.isfinite(self.cast(cameras, sight / distance[:, None], reach, stop_p=occupied_from).hit_distance)
+        first_blocked = np.full(len(miss), np.inf)
+        np.minimum.at(first_blocked, beam[blocked], t[blocked])
+        t_free = np.minimum(np.minimum(first_blocked, first_lost) - 0.5 * step, t_lo + count * step)
+        seen = t_free >= t_lo + step
+        out = ranges.copy()
+        out[miss[seen]] = -t_free[seen]
+        return out
+
+    def _keys(self, points: Points3) -> np.ndarray:
+        """One integer per voxel of ``points`` (absolute lattice keys; a neighbour's key differs by ``NEIGHBOURS``)."""
+        ijk = np.floor(np.asarray(points) / self.resolution).astype(np.int64) + 2**20
+        return (ijk[:, 0] << 42) + (ijk[:, 1] << 21) + ijk[:, 2]
 
     def _apply(self, scan: Scan, origins: Points3, directions: Points3, ranges: Array, sigmas: Array,
                starts: np.ndarray) -> int:

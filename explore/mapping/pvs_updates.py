@@ -18,9 +18,12 @@ def beam_segment(d, s, marking, no_return_clears, free_from, max_range, k_sigma,
 
     Returns ``use, hit, band, free_to, t_lo, t_end, inv2s2``: a return at range d with noise
     s = max(sigma, sigma_floor) has the occupied band d +- k s and frees [free_from, d - k s]; a beam
-    without a return frees [free_from, max_range] if ``no_return_clears``. ``marking`` (the pass that
-    stamps a frame's band voxels) needs only the band. ``use`` is False when the beam touches nothing.
+    without a return frees [free_from, max_range] if ``no_return_clears``, and [free_from, -d] if d < 0 (a
+    miss the sensor's second viewpoint saw, ``PVS._seen_misses``). ``marking`` (the pass that stamps a
+    frame's band voxels) needs only the band. ``use`` is False when the beam touches nothing.
     """
+    if d < 0.0:
+        return not marking, False, 0.0, -d, max(0.0, free_from), -d, 0.0
     hit = not math.isnan(d)
     if hit:
         if math.isnan(s) or s < sigma_floor:

@@ -292,7 +292,8 @@ def update_sensor_model(
             for b in range(starts[f], starts[f + 1]):
                 d = ranges[b]
                 s = sigmas[b]
-                reach = max_range if math.isnan(d) else d + k_sigma * (s if s > sigma_floor else sigma_floor)
+                # a beam without a return (NaN, or -t: freed to t) reaches at most the working range
+                reach = max_range if not d >= 0.0 else d + k_sigma * (s if s > sigma_floor else sigma_floor)
                 store = reserve(store, _blocks_bound(reach, res))
                 count += _sensor_beam(
                     store, tag, marking, lat, ext, res,

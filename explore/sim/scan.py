@@ -76,6 +76,11 @@ class Scan:
     normals : (n, 3) float or None
         Surface normals of the returns (world frame, towards the sensor; NaN where none), when
         depth processing estimated them from the organised image.
+    seen_from : (3,) float or None
+        A triangulating sensor's second viewpoint (the camera of a laser striper) in the sensor
+        frame, when a beam without a return may free the part of its working range that viewpoint
+        sees (a surface there would have returned); None: a missing return frees nothing beyond
+        ``no_return_clears``.
     """
 
     origins: Points3
@@ -94,6 +99,7 @@ class Scan:
     meta: dict = field(default_factory=dict)
     image_shape: tuple[int, int, int] | None = None
     normals: np.ndarray | None = None
+    seen_from: Array | None = None
 
     def __len__(self) -> int:
         return len(self.ranges)
@@ -146,4 +152,5 @@ class Scan:
             dict(self.meta),
             None,
             None if self.normals is None else self.normals[mask],
+            self.seen_from,
         )

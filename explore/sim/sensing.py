@@ -161,6 +161,7 @@ class RaySensor(Plugin, ABC):
             sensor=self.name,
             colors=self.colors(sim, poses) if getattr(self, "color", False) else None,
             image_shape=self.organised_shape(len(poses)),
+            seen_from=self.shadow_offset if getattr(self, "clear_where_seen", False) else None,
         )
 
     def organised_shape(self, frames: int) -> tuple[int, int, int]:
