@@ -100,15 +100,31 @@ class Sphere(_OncePerRun):
 
     def candidates(self, ctx: PlanningContext) -> list[Candidate]:
         out = []
+        turns = self.turns(ctx)
         for index, (eye, view) in enumerate(self.views(ctx)):
-            pose = frame_from(view, any_sweep(view), eye)
-            if pose is None or in_environment_boxes(ctx, eye[None])[0]:
+            if in_environment_boxes(ctx, eye[None])[0]:
                 continue
-            target = sweep_target(ctx, pose, self.path_length)
-            if target is None:
-                continue
-            out.append(Candidate(target, self.name, {"kind": "sphere", "index": index}, None, ctx.iteration))
+            up = any_sweep(view)
+            for turn in turns:
+                sweep = np.cos(turn) * up + np.sin(turn) * np.cross(view, up)
+                pose = frame_from(view, sweep, eye)
+                target = None if pose is None else sweep_target(ctx, pose, self.path_length)
+                if target is None:
+                    continue
+                info = {"kind": "sphere", "index": index}
+                if len(turns) > 1:
+                    info["turn_deg"] = round(float(np.rad2deg(turn)))
+                out.append(Candidate(target, self.name, info, None, ctx.iteration))
         return out
+
+    @staticmethod
+    def turns(ctx: PlanningContext) -> Array:
+        """Turns of the sweep about the view axis: one for most sensors; four for a line sensor whose camera sits
+        beside the stripe (``shadow_offset``), so that each view is offered with the camera above, beside and below
+        the laser (what the laser lights only a camera on the right side sees)."""
+        if ctx.sensor.geometry == "line" and getattr(ctx.sensor, "shadow_offset", None) is not None:
+            return np.deg2rad([0.0, 90.0, 180.0, 270.0])
+        return np.zeros(1)
 
 
 class RandomViews(ViewGenerator):

@@ -261,6 +261,25 @@ def test_sphere_generator_sizes(registry, striper) -> None:  # noqa: ANN001
     assert len(gen.generate(ctx)) == 121
 
 
+def test_the_sphere_offers_a_triangulating_striper_each_path_with_its_camera_on_four_sides(registry) -> None:  # noqa: ANN001
+    striper = registry.create("sensor", "laser_striper", {"profile": "triangulation"})
+    ctx = context(MeshSurface(grid_mesh()), striper)
+    cands = registry.create("view_generator", "sphere").generate(ctx)
+    by_view: dict[int, list] = {}
+    for cand in cands:
+        by_view.setdefault(cand.info["index"], []).append(cand)
+    full = [group for group in by_view.values() if len(group) == 4]
+    assert len(full) > 40  # the lowest paths lose a turn or two below the support
+    for group in full:
+        views = np.array([c.target.start[:3, 2] for c in group])
+        assert np.allclose(views, views[0])  # the same view ...
+        cameras = np.array([c.target.start[:3, :3] @ striper.shadow_offset for c in group]) / striper.baseline
+        assert sorted(c.info["turn_deg"] for c in group) == [0, 90, 180, 270]
+        assert cameras[0] @ cameras[2] == pytest.approx(-1.0)  # ... with the camera above and below
+        assert cameras[1] @ cameras[3] == pytest.approx(-1.0)  # and on either side of the laser
+        assert abs(cameras[0] @ cameras[1]) < 1e-9
+
+
 def test_rotation_matches_rodrigues() -> None:
     r = rotation(np.array([0.0, 0.0, 1.0]), np.pi / 2)
     assert r @ np.array([1.0, 0, 0]) == pytest.approx([0, 1, 0])
