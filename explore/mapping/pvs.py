@@ -287,9 +287,10 @@ class PVS(PVSFeatures, PVSQueries):
 
         A surface in the laser's path where the camera sees it would have returned, so the missing return
         proves free every voxel along the beam up to the first one the camera cannot see (its line of sight
-        meets a voxel the PVS holds occupied) or the laser cannot reach (an occupied voxel on the beam: there
-        the return was lost, not absent). Points a voxel apart along the beam inside the box are tested, those
-        in voxels not yet known free.
+        meets a voxel the PVS holds occupied), or that may hold a surface whose return was lost rather than
+        absent: one the map holds as surface (p >= ``SEEN_SURFACE``) or within a voxel of a return of this
+        scan (grazing incidence thins a seen surface's returns out). Points a voxel apart along the beam
+        inside the box are tested, those in voxels not yet known free.
         """
         miss = np.flatnonzero(np.isnan(ranges))
         if not len(miss):
