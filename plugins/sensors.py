@@ -249,6 +249,11 @@ class LaserStriper(RaySensor):
         """The camera, ``baseline`` along the sweep."""
         return np.array([0.0, self.baseline, 0.0]) if self.camera_shadow else None
 
+    @property
+    def seen_from(self) -> np.ndarray | None:
+        """The camera, when ``clear_where_seen``: a surface it sees on the laser's path would have returned."""
+        return self.shadow_offset if self.clear_where_seen else None
+
     def sigma(self, d: np.ndarray) -> np.ndarray:
         """The total range standard deviation: white noise and speckle (independent)."""
         return super().sigma(d) * np.sqrt(1.0 + self.speckle_sigma**2)

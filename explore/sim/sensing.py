@@ -161,7 +161,7 @@ class RaySensor(Plugin, ABC):
             sensor=self.name,
             colors=self.colors(sim, poses) if getattr(self, "color", False) else None,
             image_shape=self.organised_shape(len(poses)),
-            seen_from=self.shadow_offset if getattr(self, "clear_where_seen", False) else None,
+            seen_from=self.seen_from,
         )
 
     def organised_shape(self, frames: int) -> tuple[int, int, int]:
@@ -175,6 +175,12 @@ class RaySensor(Plugin, ABC):
         """Where the triangulation's second viewpoint (the projector of a structured-light camera,
         the camera of a laser striper) sits in the sensor frame (3,), when its shadows are
         simulated; None: an emitter at the sensor's centre, no shadows."""
+        return None
+
+    @property
+    def seen_from(self) -> Points3 | None:
+        """Where the second viewpoint sits (sensor frame, (3,)) when a beam without a return may free what that
+        viewpoint saw of it (``Scan.seen_from``); None (default): a missing return proves nothing."""
         return None
 
     def lit(self, sim: Simulation, poses: np.ndarray, frame: np.ndarray, points: Points3) -> np.ndarray:
