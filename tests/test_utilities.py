@@ -72,6 +72,21 @@ def test_min_range_skips_near_voxels() -> None:
     assert acc[ENTROPY] == pytest.approx(7.0)
 
 
+def test_a_box_of_the_known_environment_ends_the_beams() -> None:
+    grid = row_grid([0.5] * 10)  # x from 0 to 0.1 m, all unknown
+    o, d = ray_x()
+    table = (np.array([0.043, -1.0, -1.0]), np.array([0.2, 1.0, 1.0]))  # enters voxel 4 at x = 0.043
+    acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0, TraceSettings(visited=True), occluders=[table])[0]
+    assert acc[UNKNOWN_VOXELS] == 5  # voxels 0-4: the one holding the box's face counts, none behind it
+    assert acc[UNK_FIRST] == 1
+    behind = (np.array([-0.2, -1.0, -1.0]), np.array([-0.06, 1.0, 1.0]))  # behind the sensor: no effect
+    acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0, occluders=[behind])[0]
+    assert acc[UNKNOWN_VOXELS] == 10
+    inside = (np.array([-0.1, -1.0, -1.0]), np.array([0.01, 1.0, 1.0]))  # the sensor inside a box sees nothing
+    acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0, occluders=[inside])[0]
+    assert acc[UNKNOWN_VOXELS] == 0 and acc[UNK_FIRST] == 0
+
+
 def test_quality_terms_and_incidence_cutoff() -> None:
     grid = row_grid([0.1, 0.1, 0.98, 0.5])
     grid.has_feature[2, 0, 0] = True

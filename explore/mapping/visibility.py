@@ -25,6 +25,10 @@ HITS          beams that end on an occupied voxel
 ============  ==========================================================================
 
 P_v(x) = prod of (1 - p) over the voxels in front of x (Isler's visibility probability).
+``occluders``, axis-aligned boxes of the known environment (a table, a chair, a pedestal), end a
+beam half a voxel past its entry into the first of them: the known environment hides what lies
+behind it although the PVS does not hold it (a camera below a table top does not see the object
+on the table through it).
 With ``visited`` the traversal quantities count every voxel once per candidate (thesis
 Sec. 4.5.3 visited marking); the first-hit and rear-side counts are always distinct.
 
@@ -46,7 +50,7 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from explore.core import Array, Points3
-from explore.mapping.traversal import next_axis, ray_start
+from explore.mapping.traversal import _slab, next_axis, ray_start
 
 ENTROPY, UNKNOWN_VOXELS, QUAL_LIT, QUAL_NEED, TRAVERSED, OCC_FIRST, UNK_FIRST = range(7)
 OCCLUSION, UNOBSERVED, REAR_VOXEL, REAR_ENTROPY, PROXIMITY, HITS = range(7, 13)
@@ -143,10 +147,26 @@ class VoxelGrid:
         return VoxelGrid(pooled.astype(np.float32), self.origin.copy(), self.resolution * k)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _reach(ox, oy, oz, d0, d1, d2, tmax, boxes, res):  # noqa: ANN001, ANN202
+    """How far a beam (world origin, unit direction) goes: ``tmax``, or half a voxel past its entry
+    into the nearest occluder box (so the voxel that holds the box's face still counts)."""
+    reach = tmax
+    for b in range(boxes.shape[0]):
+        ok, t0, t1, _ = _slab(ox, d0, boxes[b, 0, 0], boxes[b, 1, 0], 0.0, reach, -1, 0)
+        if ok:
+            ok, t0, t1, _ = _slab(oy, d1, boxes[b, 0, 1], boxes[b, 1, 1], t0, t1, -1, 1)
+        if ok:
+            ok, t0, t1, _ = _slab(oz, d2, boxes[b, 0, 2], boxes[b, 1, 2], t0, t1, -1, 2)
+        if ok and t0 <= t1:
+            reach = min(reach, t0 + 0.5 * res)
+    return reach
+
+
 @njit(cache=True, nogil=True)
 def _trace_range(
     prob, ent, has_feat, border, density, normal, prox, origin, res,
-    origins, dirs, tstart, group, r0, r1, tmin, tmax,
+    origins, dirs, tstart, group, r0, r1, tmin, tmax, boxes,
     p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out, stamp_t, stamp_f,
 ):  # noqa: ANN001, ANN202
     """Beams r0 .. r1-1 (whole candidates); ``stamp_*`` are this worker's visited marks.
@@ -160,9 +180,10 @@ def _trace_range(
         g = group[r]
         tag = g + 1
         d0, d1, d2 = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+        reach = _reach(origins[r, 0], origins[r, 1], origins[r, 2], d0, d1, d2, tmax, boxes, res)
         (ok, t0, t1, i, j, k, si, sj, sk, tx, ty, tz, dtx, dty, dtz) = ray_start(
             origins[r, 0] - origin[0], origins[r, 1] - origin[1], origins[r, 2] - origin[2], d0, d1, d2,
-            max(tstart[r], 0.0), tmax, lat, inv_res, res, nx, ny, nz,  # HRT: free up to tstart
+            max(tstart[r], 0.0), reach, lat, inv_res, res, nx, ny, nz,  # HRT: free up to tstart
         )
         if not ok:
             continue
@@ -233,7 +254,7 @@ def _trace_range(
 @njit(cache=True, nogil=True, parallel=True)
 def _trace_chunks(
     prob, ent, has_feat, border, density, normal, prox, origin, res,
-    origins, dirs, tstart, group, bounds, tmin, tmax,
+    origins, dirs, tstart, group, bounds, tmin, tmax, boxes,
     p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out,
 ):  # noqa: ANN001, ANN202
     """One worker per chunk of whole candidates, each with its own visited marks."""
@@ -241,7 +262,7 @@ def _trace_chunks(
         stamp_t = np.zeros(prob.shape, dtype=np.int32)
         stamp_f = np.zeros(prob.shape, dtype=np.int32)
         _trace_range(prob, ent, has_feat, border, density, normal, prox, origin, res,
-                     origins, dirs, tstart, group, bounds[c], bounds[c + 1], tmin, tmax,
+                     origins, dirs, tstart, group, bounds[c], bounds[c + 1], tmin, tmax, boxes,
                      p_stop, unk_lo, unk_hi, cos_cut, lam, visited, out, stamp_t, stamp_f)
 
 
@@ -314,12 +335,13 @@ def trace(
     max_range: float,
     settings: TraceSettings = TraceSettings(),
     beams_per_frame: int | None = None,
+    occluders: list[tuple[Array, Array]] | None = None,
 ) -> np.ndarray:
     """Accumulators (n_groups, N_ACC) of the beams; ``group`` gives each beam's candidate.
 
     Beams of one candidate must be contiguous, frame after frame with ``beams_per_frame``
     beams each (HRT bundles span 2^a beams and 2^a frames; None: bundles of 4^a consecutive
-    beams).
+    beams). ``occluders``: boxes (lo, hi) of the known environment that end the beams.
     """
     grid.ensure_features()
     grid.ensure_entropy()
@@ -339,8 +361,9 @@ def trace(
         grid.prob, grid.entropy, grid.has_feature, grid.border, grid.density, grid.normal, grid.proximity,
         np.asarray(grid.origin, dtype=np.float64), float(grid.resolution), origins, directions, tstart, group,
     )
+    boxes = np.array([np.vstack([lo, hi]) for lo, hi in occluders or []], dtype=np.float64).reshape(-1, 2, 3)
     tail = (
-        float(min_range), float(max_range), float(settings.p_stop), float(settings.unknown_low),
+        float(min_range), float(max_range), boxes, float(settings.p_stop), float(settings.unknown_low),
         float(settings.unknown_high), float(np.cos(np.deg2rad(settings.incidence_deg))), float(settings.lam),
         bool(settings.visited), out,
     )

@@ -101,7 +101,7 @@ class RayUtility(Utility):
         min_range = 0.0 if getattr(sensor, "clear_from_origin", True) else sensor.min_range
         per_frame = len(sensor.local_directions()[:: self.beam_stride])
         acc = trace(ctx.grid, origins, dirs, groups, len(candidates), min_range, sensor.max_range,
-                    self.settings(), per_frame)
+                    self.settings(), per_frame, occluders=ctx.environment_boxes)
         for cand, row in zip(candidates, acc, strict=True):
             cand.diagnostics.update({name: float(v) for name, v in zip(ACC_NAMES, row, strict=True)})
         return acc
