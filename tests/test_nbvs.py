@@ -322,3 +322,47 @@ def test_nbvs_mobile_tree_runs_a_short_mission(registry, tmp_path) -> None:
     assert metrics["selection_s_median"] > 0.0
     for name in ("trajectories.png", "coverage.png", "pvs.npz", "pvs.bt", "points.ply", "trace.jsonl"):
         assert (tmp_path / "run" / name).stat().st_size > 0
+
+
+def test_a_start_within_the_clearance_is_left_by_a_short_motion_first(cluttered, registry) -> None:
+    """Noise can leave the base nearer chair_1 than the planning clearance without touching it; no motion
+    starts from there, so the view/state plan first backs out (valid at zero clearance) and every
+    candidate's plan begins with that motion."""
+    from explore.nbv.view_states import ViewState
+
+    robot = cluttered.robot
+    saved = robot.q.copy()
+    try:
+        session = NBVSSession(cluttered, registry, expected=False, seed=0, max_views=1)
+        goal = session.q.copy()
+        near = goal.copy()
+        near[:3] = (0.65, -0.308, math.pi / 2)  # facing chair_1, nearer than the planning clearance (1 cm)
+        assert not robot.in_collision(near, "known", margin=0.0) and not session.problem.is_valid(near)
+        assert session.planner.plan(session.problem, near, goal, seed=1) is None  # no plan from there
+        session.q = near
+        planned = session.plan([ViewState(q=goal, pose=robot.fk(goal))])
+        assert len(planned) == 1
+        nominal = planned[0].nominal
+        assert np.allclose(nominal[0], near) and np.allclose(nominal[-1][:2], goal[:2], atol=0.02)
+        assert not any(robot.in_collision(q, "known", margin=0.0) for q in nominal)
+    finally:
+        robot.q = saved
+        robot.set_config(saved)
+
+
+def test_rollouts_call_free_the_space_the_robot_stands_in() -> None:
+    """An eye-in-hand camera never sees the space its arm fills: as unknown voxels they made every
+    rollout from there collide; once the robot has stood in them they are free for the rollouts too."""
+    from explore.mapping import PVS
+    from explore.motion import BodyFreeSpace
+
+    pvs = PVS(np.zeros(3), np.full(3, 0.3), 0.01)  # all unknown
+    space = BodyFreeSpace(pvs)
+    field = ObstacleField([], space)
+    probe = np.array([[0.155, 0.155, 0.155]])
+    assert field.clearance(probe)[0] < 0.0
+    axis = np.arange(0.105, 0.21, 0.01)
+    space.stand(np.stack(np.meshgrid(axis, axis, axis), axis=-1).reshape(-1, 3))  # an 11 cm cube of body
+    half_diagonal = 0.5 * math.sqrt(3.0) * 0.01
+    assert field.clearance(probe)[0] == pytest.approx(0.06 - half_diagonal, abs=1e-9)  # 6 voxels to the unknown
+    assert ObstacleField([], pvs).clearance(probe)[0] < 0.0  # the PVS itself is unchanged

@@ -25,6 +25,7 @@
 # The names other packages use (they import from the package, never from its modules).
 from explore.motion.bullet_robot import BulletRobot
 from explore.motion.collision import BulletCollider, Part, self_collision_pairs
+from explore.motion.escape import escape_motion, joined_plans
 from explore.motion.feedback import Rollouts, control_pieces, execute_following, follow_plan, plan_controls
 from explore.motion.geometric import OPTIONAL_GEOMETRIC, geometric_planner_names, plan, planner_class, straight_line
 from explore.motion.kernels import rigid_clearances, rigid_first_hit
@@ -70,9 +71,11 @@ __all__ = [
     "classify_blocked",
     "control_pieces",
     "control_planner_names",
+    "escape_motion",
     "execute_following",
     "follow_plan",
     "geometric_planner_names",
+    "joined_plans",
     "linear_scan_path_ik",
     "path_is_valid",
     "path_length",

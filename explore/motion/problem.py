@@ -151,6 +151,7 @@ class BodyFreeSpace:
         self.pvs = pvs
         self._keys = np.zeros(0, dtype=np.int64)
         self._stamp = 0
+        self._field: tuple[tuple[int, int], np.ndarray] | None = None
 
     @property
     def min_corner(self) -> Array:
@@ -174,6 +175,33 @@ class BodyFreeSpace:
         merged = np.union1d(self._keys, keys)
         if len(merged) != len(self._keys):
             self._keys, self._stamp = merged, self._stamp + 1
+
+    @property
+    def resolution(self) -> float:
+        return float(self.pvs.resolution)
+
+    @property
+    def lattice(self) -> np.ndarray:
+        return self.pvs.lattice
+
+    def index(self, points: Points3) -> tuple[np.ndarray, np.ndarray]:
+        return self.pvs.index(points)
+
+    def distance_field(self) -> np.ndarray:
+        """``pvs.distance_field`` with the voxels the body has stood in free (for the clearance of
+        rollouts, :class:`explore.nbv.ObstacleField`, which takes this in place of the PVS)."""
+        if not len(self._keys):
+            return self.pvs.distance_field()
+        if self._field is not None and self._field[0] == self.version:
+            return self._field[1]
+        from scipy.ndimage import distance_transform_edt
+
+        obstacle = self.pvs.obstacle_grid().copy()
+        obstacle.reshape(-1)[self._keys] = False
+        field = distance_transform_edt(~obstacle, sampling=self.resolution) if obstacle.any() else \
+            np.full(obstacle.shape, np.inf)
+        self._field = (self.version, field)
+        return field
 
     def is_free(self, points: Points3, clearance: float = 0.0, outside_free: bool = True) -> np.ndarray:
         """``pvs.is_free``, and True in the voxels the body has stood in."""

@@ -46,7 +46,7 @@ import numpy as np
 
 from explore.core import BUDGET, FAILURE, NO_CANDIDATES, BadInput, Pose, validate_params, wrap_angle
 from explore.mapping import PVS, GroundTruthMetrics, VoxelGrid
-from explore.motion import Capability, Execution, MotionProblem, execute_following
+from explore.motion import BodyFreeSpace, Capability, Execution, MotionProblem, execute_following
 from explore.nbv.area_factor import AreaFactor
 from explore.nbv.candidates import PlanningContext
 from explore.nbv.expected_utility import ObstacleField
@@ -133,8 +133,9 @@ class NBVSSession(Reporting, Scoring, StateSampling):
         self.region_min = np.asarray(sim.spec.region_min, dtype=float)
         self.region_max = np.asarray(sim.spec.region_max, dtype=float)
         self.pvs = PVS.for_region(self.region_min, self.region_max, resolution)
-        self.obstacles = ObstacleField.from_sim(sim, self.pvs)
-        self.problem = MotionProblem(self.robot, space_free=self.pvs.is_free)
+        self.free_space = BodyFreeSpace(self.pvs)  # the PVS, and where the robot has stood is free
+        self.obstacles = ObstacleField.from_sim(sim, self.free_space)
+        self.problem = MotionProblem(self.robot, space_free=self.free_space.is_free)
         self.visibility = AreaFactor(**validate_params(
             AreaFactor.params, {"beam_stride": int(beam_stride), "overlap": self.overlap}, "<nbvs>"))
         self.utility_name = utility or AreaFactor.name
@@ -200,11 +201,17 @@ class NBVSSession(Reporting, Scoring, StateSampling):
                                 self.leg_length)
         self.executions.append(run)
         self.q = np.asarray(run.final, dtype=float).copy()
+        self.stand()
         if self.robot.base_dofs:  # the heading is periodic: keep it in [-pi, pi) (within the limits)
             th = self.robot.base_dofs[2]
             self.q[th] = wrap_angle(self.q[th])
             self.robot.q = self.q.copy()
         return run
+
+    def stand(self) -> None:
+        """The robot stands at ``q``: the voxels its body fills are free from now on (an eye-in-hand
+        camera never sees the space its arm is in; without this no motion may leave it)."""
+        self.free_space.stand(self.robot.link_points(self.q, within=(self.pvs.min_corner, self.pvs.max_corner)))
 
     def acquire(self, pose: Pose) -> Any:
         """A scan from the world's sensor at the executed sensor pose."""

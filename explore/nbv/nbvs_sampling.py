@@ -70,6 +70,7 @@ class StateSampling:
         self.q = best_q
         robot.q = best_q.copy()
         robot.set_config(best_q)
+        self.stand()
         return robot.fk(best_q)
 
     def _ray_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:

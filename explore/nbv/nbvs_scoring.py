@@ -10,6 +10,7 @@ import numpy as np
 from explore.core import pick_best, wrap_angle
 from explore.motion import (
     MotionPlan,
+    escape_motion,
     path_length,
 )
 from explore.nbv.candidates import Candidate
@@ -28,19 +29,27 @@ class Scoring:
         rollout), so the noise-free execution of the controls is collision-free. A geometric
         path becomes per-``dt`` velocity controls (``controls_from_path``); planners that
         return controls keep them (their final state may differ from the candidate's: DU and
-        EU score the state the controls reach).
+        EU score the state the controls reach). A start the planner calls invalid (noise left the
+        robot within its clearance) is left first by a short motion valid at zero clearance
+        (:func:`explore.motion.escape_motion`), which every plan then begins with.
         """
         robot, out = self.robot, []
+        start, escape = self.q, None
+        if not self.problem.is_valid(start):  # noise left the robot within the clearance: back out first
+            rng = np.random.default_rng([self.plan_seed, len(self.plan_log)])
+            escape = escape_motion(robot, self.problem, start, rng)
+            if escape is not None:
+                start = escape.path[-1]
         for i, s in enumerate(states):
             self.progress(f"motion planning: candidate {i + 1} of {len(states)}, {len(out)} planned")
             goal = s.q.copy()
             if robot.base_dofs:
                 th = robot.base_dofs[2]
-                goal[th] = self.q[th] + wrap_angle(goal[th] - self.q[th])
+                goal[th] = start[th] + wrap_angle(goal[th] - start[th])
                 if not robot.lower[th] <= goal[th] <= robot.upper[th]:
                     continue
             t0 = time.perf_counter()
-            plan = self.planner.plan(self.problem, self.q, goal, seed=self.plan_seed + 2 * len(self.plan_log))
+            plan = self.planner.plan(self.problem, start, goal, seed=self.plan_seed + 2 * len(self.plan_log))
             self.plan_log.append((time.perf_counter() - t0, plan is not None))
             if plan is None:
                 continue
@@ -50,6 +59,8 @@ class Scoring:
                 controls, nominal = robot.controls_from_path(plan.path)
             if len(controls) == 0:
                 continue
+            if escape is not None:
+                controls, nominal = np.vstack([escape.controls, controls]), np.vstack([escape.path, nominal[1:]])
             s.plan = MotionPlan(nominal, controls=controls, dt=float(robot.dt), planner=plan.planner,
                                 planning_time=plan.planning_time, length=path_length(robot, nominal))
             s.nominal, s.length = nominal, s.plan.length

@@ -53,7 +53,9 @@ from explore.motion import (
     MotionProblem,
     ScanPathIK,
     classify_blocked,
+    escape_motion,
     execute_following,
+    joined_plans,
     linear_scan_path_ik,
     path_is_valid,
     path_length,
@@ -320,32 +322,13 @@ class ScanMotion:
                 plan.verdict, plan.reason = NO_PATH, "the base cannot follow the path without a collision"
                 return plan
         if escape is not None:
-            approach = _joined(escape, approach, robot)
+            approach = joined_plans(escape, approach, robot)
         plan.approach, plan.reason = approach, f"{approach.planner}: {approach.length:.3f}"
         return plan
 
-    def _escape(self, start: Array, problem: MotionProblem, tries: int = 64) -> MotionPlan | None:
-        """A small motion out of a configuration the planner calls invalid, if one is valid at zero
-        clearance all along (MoveIt's FixStartStateCollision): positioning noise can leave the robot
-        nearer the known environment than the planning clearance without touching it, and no motion
-        starts from there. Configurations within 1-4 steps (2 cm / 0.03 rad of the base, 0.02 rad of
-        a joint), nearest first; None if none will do."""
-        robot = self.robot
-        rng = np.random.default_rng(self.plan_seed + self._calls)
-        step = np.full(len(start), 0.02)
-        base = list(robot.base_dofs)
-        if base:
-            step[base] = (0.02, 0.02, 0.03)
-        for radius in (1, 2, 3, 4):
-            nearby = start + radius * step * rng.uniform(-1.0, 1.0, (tries, len(start)))
-            for q in nearby[np.argsort([robot.distance(start, q) for q in nearby], kind="stable")]:
-                if not problem.is_valid(q):
-                    continue
-                controls, rolled = robot.controls_from_path(np.vstack([start, q]))
-                if path_is_valid(problem, rolled[1:], resolution=np.inf, margin=0.0):
-                    return MotionPlan(rolled, controls=controls, dt=float(robot.dt), planner="escape",
-                                      length=path_length(robot, rolled))
-        return None
+    def _escape(self, start: Array, problem: MotionProblem) -> MotionPlan | None:
+        """A small motion out of a start the planner calls invalid (:func:`explore.motion.escape_motion`)."""
+        return escape_motion(self.robot, problem, start, np.random.default_rng(self.plan_seed + self._calls))
 
     def _drivable(self, approach: MotionPlan, problem: MotionProblem) -> MotionPlan | None:
         """The velocity controls a base executes for a geometric path (a differential drive turns,
@@ -486,12 +469,3 @@ def make_planner(registry: Any, robot: Any, planner: Any, source: str = "--plann
     if isinstance(planner, str):
         return registry.create("motion_planner", planner, params or {}, source, "planner")
     return planner
-
-
-def _joined(first: MotionPlan, second: MotionPlan, robot: Any) -> MotionPlan:
-    """One plan: ``first`` then ``second`` (which starts where ``first`` ends)."""
-    path = np.vstack([first.path, second.path[1:]])
-    controls = None if second.controls is None else np.vstack([first.controls, second.controls])
-    return MotionPlan(path, controls=controls, dt=float(robot.dt) if controls is not None else 0.0,
-                      planner=f"{first.planner}+{second.planner}", planning_time=second.planning_time,
-                      length=first.length + second.length)
