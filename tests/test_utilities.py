@@ -79,6 +79,9 @@ def test_a_box_of_the_known_environment_ends_the_beams() -> None:
     acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0, TraceSettings(visited=True), occluders=[table])[0]
     assert acc[UNKNOWN_VOXELS] == 5  # voxels 0-4: the one holding the box's face counts, none behind it
     assert acc[UNK_FIRST] == 1
+    flush = (np.array([0.04, -1.0, -1.0]), np.array([0.2, 1.0, 1.0]))  # the face on a voxel border
+    acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0, occluders=[flush])[0]
+    assert acc[UNKNOWN_VOXELS] == 4  # voxel 4 lies wholly inside the box
     behind = (np.array([-0.2, -1.0, -1.0]), np.array([-0.06, 1.0, 1.0]))  # behind the sensor: no effect
     acc = trace(grid, o, d, np.zeros(1, np.int64), 1, 0.0, 1.0, occluders=[behind])[0]
     assert acc[UNKNOWN_VOXELS] == 10

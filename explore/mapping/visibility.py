@@ -26,9 +26,9 @@ HITS          beams that end on an occupied voxel
 
 P_v(x) = prod of (1 - p) over the voxels in front of x (Isler's visibility probability).
 ``occluders``, axis-aligned boxes of the known environment (a table, a chair, a pedestal), end a
-beam half a voxel past its entry into the first of them: the known environment hides what lies
-behind it although the PVS does not hold it (a camera below a table top does not see the object
-on the table through it).
+beam where it enters the first of them (a voxel wholly inside a box is never counted): the known
+environment hides what lies behind it although the PVS does not hold it (a camera below a table
+top does not see the object on the table through it).
 With ``visited`` the traversal quantities count every voxel once per candidate (thesis
 Sec. 4.5.3 visited marking); the first-hit and rear-side counts are always distinct.
 
@@ -148,9 +148,9 @@ class VoxelGrid:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _reach(ox, oy, oz, d0, d1, d2, tmax, boxes, res):  # noqa: ANN001, ANN202
-    """How far a beam (world origin, unit direction) goes: ``tmax``, or half a voxel past its entry
-    into the nearest occluder box (so the voxel that holds the box's face still counts)."""
+def _reach(ox, oy, oz, d0, d1, d2, tmax, boxes):  # noqa: ANN001, ANN202
+    """How far a beam (world origin, unit direction) goes: ``tmax``, or to its entry into the nearest
+    occluder box (the traversal still visits the voxel that holds the entry point)."""
     reach = tmax
     for b in range(boxes.shape[0]):
         ok, t0, t1, _ = _slab(ox, d0, boxes[b, 0, 0], boxes[b, 1, 0], 0.0, reach, -1, 0)
@@ -159,7 +159,7 @@ def _reach(ox, oy, oz, d0, d1, d2, tmax, boxes, res):  # noqa: ANN001, ANN202
         if ok:
             ok, t0, t1, _ = _slab(oz, d2, boxes[b, 0, 2], boxes[b, 1, 2], t0, t1, -1, 2)
         if ok and t0 <= t1:
-            reach = min(reach, t0 + 0.5 * res)
+            reach = min(reach, t0)
     return reach
 
 
@@ -180,7 +180,7 @@ def _trace_range(
         g = group[r]
         tag = g + 1
         d0, d1, d2 = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-        reach = _reach(origins[r, 0], origins[r, 1], origins[r, 2], d0, d1, d2, tmax, boxes, res)
+        reach = _reach(origins[r, 0], origins[r, 1], origins[r, 2], d0, d1, d2, tmax, boxes)
         (ok, t0, t1, i, j, k, si, sj, sk, tx, ty, tz, dtx, dty, dtz) = ray_start(
             origins[r, 0] - origin[0], origins[r, 1] - origin[1], origins[r, 2] - origin[2], d0, d1, d2,
             max(tstart[r], 0.0), reach, lat, inv_res, res, nx, ny, nz,  # HRT: free up to tstart
