@@ -57,7 +57,8 @@ class ObstacleField:
     The PVS contributes every voxel with p >= 0.05 (unknown is an obstacle): its distance
     field minus half a voxel diagonal and ``space_margin`` inside the grid (the robot's
     ``space_margin``: its clearance plus the gaps between the sampled points), the distance to
-    the grid box outside.
+    the grid box outside. ``pvs`` may be a :class:`explore.motion.BodyFreeSpace` over the PVS (the
+    voxels the robot has stood in are then free).
     A point with clearance < 0 is in collision. Bodies below ``ground`` (the floor) are left
     out: planar base noise never changes heights, so it cannot push the robot into them.
     """
