@@ -3,7 +3,8 @@
 Beyond PyYAML's safe loader: the file must be UTF-8 text of a sensible size; a mapping may
 not repeat a key (PyYAML silently keeps the last one); aliases may not expand the document
 beyond :data:`MAX_NODES` nodes (a "billion laughs" file is rejected in milliseconds instead of
-being walked and printed); recursive aliases and absurd nesting are rejected too.
+being walked and printed); recursive aliases, absurd nesting and keys that are not text (``0E0:``
+is a number) are rejected too.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import yaml
 
 from explore.core.errors import BadInput
 
+TEXT_TAG, MERGE_TAG = "tag:yaml.org,2002:str", "tag:yaml.org,2002:merge"
 MAX_BYTES = 8 * 2**20
 MAX_NODES = 100_000  # nodes of the document with every alias expanded
 NAME_MAX = 255  # bytes of one path component (Linux, macOS)
@@ -131,7 +133,10 @@ def _check(root: yaml.Node, source: str) -> None:
         if isinstance(node, yaml.MappingNode):
             seen: dict[str, yaml.Node] = {}
             for k, _ in node.value:
-                if isinstance(k, yaml.ScalarNode) and k.tag != "tag:yaml.org,2002:merge":
+                if k.tag not in (TEXT_TAG, MERGE_TAG):  # 0E0: or 1: is a number, [a]: a list; names are text
+                    shown = k.value[:60] if isinstance(k, yaml.ScalarNode) else k.tag.rsplit(":", 1)[-1]
+                    raise BadInput(source, _line(k), f"a field name must be text, got {shown!r} (quote it)")
+                if isinstance(k, yaml.ScalarNode) and k.tag != MERGE_TAG:
                     if k.value in seen:
                         raise BadInput(source, _line(k), f"duplicate key {k.value[:60]!r} (first on "
                                                          f"{_line(seen[k.value])})")

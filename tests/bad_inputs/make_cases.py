@@ -115,6 +115,7 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "overview_unknown_field": ("unknown field", [("sensor:\n", "overview: {eye: [0, 0, 1], target: [0, 0, 0], up: 1}\nsensor:\n")]),
     "duplicate_key": ("duplicate key 'robot'", [("sensor:\n", "robot: free_flyer\nsensor:\n")]),
     "duplicate_nested_key": ("duplicate key 'size'", [("size: 0.15", "size: 0.15\n    size: 0.2")]),
+    "number_key": ("a field name must be text, got '0E0'", [("sensor:\n", "0E0: 1\nsensor:\n")]),
     "alias_bomb": ("aliases expand this document beyond", "a: &a [x, x, x, x, x, x, x, x, x, x]\n"
                    + "".join(f"{chr(98 + i)}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, "
                              f"*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, "
