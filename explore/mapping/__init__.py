@@ -30,6 +30,7 @@ from explore.mapping.metrics import (
 )
 from explore.mapping.pvs import PVS
 from explore.mapping.pvs_grid import FREE, OCCUPIED, THRESHOLDS, UNKNOWN, check_grid, entropy_bits, logit
+from explore.mapping.pvs_queries import obstacle_distance
 from explore.mapping.sparse_pvs import SparsePVS, make_pvs
 from explore.mapping.surface import SurfaceModel
 from explore.mapping.traversal import traverse
@@ -99,6 +100,7 @@ __all__ = [
     "logit",
     "make_pvs",
     "observable_surface",
+    "obstacle_distance",
     "path_length",
     "rms_error",
     "sample_surface",

@@ -216,13 +216,7 @@ class PVSQueries:
         cached = self._cache.get("edt")
         if cached is not None and cached[0] == self.version:
             return cached[1]
-        from scipy.ndimage import distance_transform_edt
-
-        obstacle = self.obstacle_grid()
-        if not obstacle.any():
-            field = np.full(self.shape, np.inf)
-        else:
-            field = distance_transform_edt(~obstacle, sampling=self.resolution)
+        field = obstacle_distance(self.obstacle_grid(), self.resolution)
         self._cache["edt"] = (self.version, field)
         return field
 
@@ -277,3 +271,13 @@ class PVSQueries:
         triangles = np.vstack([q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.int32)
         vertices = (unique - 1 + self.lattice) * self.resolution
         return TriMesh(vertices.astype(np.float64), triangles)
+
+
+def obstacle_distance(obstacle: np.ndarray, resolution: float) -> np.ndarray:
+    """Metres from each voxel centre of a boolean obstacle grid to the nearest obstacle voxel centre
+    (0 on obstacles, inf everywhere without any)."""
+    if not obstacle.any():
+        return np.full(obstacle.shape, np.inf)
+    from scipy.ndimage import distance_transform_edt
+
+    return distance_transform_edt(~obstacle, sampling=resolution)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.core import Array, Points3
+from explore.mapping import obstacle_distance
 from explore.motion.planning_clock import Budget, charge
 
 if TYPE_CHECKING:
@@ -194,12 +195,9 @@ class BodyFreeSpace:
             return self.pvs.distance_field()
         if self._field is not None and self._field[0] == self.version:
             return self._field[1]
-        from scipy.ndimage import distance_transform_edt
-
         obstacle = self.pvs.obstacle_grid().copy()
         obstacle.reshape(-1)[self._keys] = False
-        field = distance_transform_edt(~obstacle, sampling=self.resolution) if obstacle.any() else \
-            np.full(obstacle.shape, np.inf)
+        field = obstacle_distance(obstacle, self.resolution)
         self._field = (self.version, field)
         return field
 
