@@ -82,10 +82,11 @@ class VasquezEU(StrategyPlugin):
 
 
 #: the stop calibrated on the broad object set (issue 20, docs/results.md, benchmarks/calibrate_stop.py):
-#: ĉ_m 95 %, or 90 % once boundary search / hole rescan has nothing left (below that the session's
-#: fallback views go on), or ĉ_m without the support opening 99 % once a fallback view was scanned,
-#: or ĉ_m 80 % once it grew by less than 1 point over 5 scans (the candidates add no surface; before any
-#: fallback view, the first such stall scans the fallback's best view first and stops two scans later)
+#: ĉ_m 95 %, or 90 % once boundary search / hole rescan has nothing left and one fallback view was
+#: scanned (below that the session's fallback views go on), or ĉ_m without the support opening 99 %
+#: once a fallback view was scanned, or ĉ_m 80 % once it grew by less than 1 point over 5 scans (the
+#: candidates add no surface; before any fallback view, the first such stall scans the fallback's best
+#: view first and stops two scans later)
 CALIBRATED_TERMINATION = {"coverage": 0.95, "exhausted_coverage": 0.90, "off_support_coverage": 0.99,
                           "saturated_coverage": 0.80, "saturated_off_support": 0.90, "saturation_scans": 5,
                           "saturation_delta": 0.01,
@@ -94,8 +95,9 @@ CALIBRATED_TERMINATION = {"coverage": 0.95, "exhausted_coverage": 0.90, "off_sup
 EXTRA = [
     make_strategy("ig_quality/bs_hr_calibrated",
                   "Thesis IG/Quality over BS/HR candidates with the stop calibrated on the broad object set: "
-                  "ĉ_m 95 %, or 90 % when BS/HR has no candidate left, or 99 % without the support opening after "
-                  "a fallback view, or 80 % once ĉ_m stops growing and a fallback view was tried "
+                  "ĉ_m 95 %, or 90 % when BS/HR has no candidate left after a fallback view, or 99 % without the "
+                  "support opening after a fallback view, or 80 % once ĉ_m stops growing and a fallback view was "
+                  "tried "
                   "(c_a at the stop >= 97 % on every object).",
                   "boundary_hole", "ig_quality", "coverage_target", {}, {"omega": -1.0}, dict(CALIBRATED_TERMINATION)),
     make_strategy("vasquez/du", "Vasquez-Gomez deterministic utility (pos reg sur dist) over random views.",

@@ -34,7 +34,8 @@ class CoverageTarget(Termination):
     """Stop at ĉ_m >= target and d̄_m >= target, else at n_abort scans (thesis Sec. 4.6: 80 % / 20 % / 30).
 
     With ``exhausted_coverage`` < 1 it also stops at that lower ĉ_m when the strategy's generator
-    has nothing left to look at (boundary search and hole rescan find no open edge): ĉ_m
+    has nothing left to look at (boundary search and hole rescan find no open edge), after one view of
+    the session's fallback generator (over all directions) if it has one and none was scanned yet: ĉ_m
     (Eq. 4.35) underestimates c_a by 1-38 points depending on the shape (docs/results.md, the
     broad set), so a single target either stops early on some shapes or never on others. Most of
     that bias is the opening where the object stands on its support, which no sensor sees: with
@@ -97,7 +98,11 @@ class CoverageTarget(Termination):
         if ctx.exhausted and self.exhausted_coverage < 1.0 and reaches(c, self.exhausted_coverage) \
                 and reaches(d, self.density):
             reason = f"no candidate left at ĉ_m = {c:.3f} >= {self.exhausted_coverage}, d̄_m = {d:.3f} >= {self.density}"
-            return Decision(STOP, reason, SUCCESS, min(c - self.exhausted_coverage, d - self.density))
+            margin = min(c - self.exhausted_coverage, d - self.density)
+            if ctx.fallback_available and not ctx.fallback_scans and self.offered_at is None:
+                self.offered_at = ctx.iteration
+                return Decision(FALLBACK, f"{reason}: the fallback's views are offered first", margin=margin)
+            return Decision(STOP, reason, SUCCESS, margin)
         off = float(ctx.off_support_history[-1]) if ctx.off_support_history else 0.0
         if self.off_support_coverage > 0.0 and ctx.fallback_scans and reaches(off, self.off_support_coverage) \
                 and reaches(d, self.density):

@@ -95,6 +95,16 @@ def test_terminations(registry) -> None:  # noqa: ANN001
     calibrated.reset()
     ctx.fallback_scans = 1  # a fallback view was already scanned: saturation stops at once
     assert calibrated.decide(ctx).stop
+    # boundary search and hole rescan have nothing left at ĉ_m 91 %: one view over all directions first
+    # (a mug lying on its side: the first fallback view took c_a from 96.4 to 97.3 %), then the stop
+    calibrated.reset()
+    ctx = ctx_with([0.8, 0.91])
+    ctx.exhausted, ctx.fallback_available, ctx.off_support_history = True, True, [0.95]
+    assert calibrated.decide(ctx).action == FALLBACK
+    ctx = ctx_with([0.8, 0.91, 0.912])
+    ctx.exhausted, ctx.fallback_available, ctx.off_support_history, ctx.fallback_scans = True, True, [0.95], 1
+    decision = calibrated.decide(ctx)
+    assert decision.stop and decision.outcome == "success" and "no candidate left" in decision.reason
     below = registry.create("termination", "unknown_below", {"threshold": 30})
     ctx.best_diagnostics = {"unknown_first": 12.0}
     assert below.decide(ctx).stop and "12" in below.decide(ctx).reason
