@@ -60,6 +60,20 @@ def test_the_field_objects_are_in_neither_set_and_every_world_loads(tmp_path: Pa
         load_world_spec(path)
 
 
+def test_the_turned_objects_are_new_poses_or_new_parts_and_every_world_loads(tmp_path: Path) -> None:
+    """benchmarks/turned_set.yaml (a check of the stop on unseen shapes): no object in a pose any other set
+    has, its random parts in no other set."""
+    turned_file = Path(__file__).resolve().parents[1] / "benchmarks" / "turned_set.yaml"
+    turned = broad_objects(turned_file)
+    others = [e for f in (None, HELDOUT_FILE, FIELD_FILE) for e in (broad_objects(f) if f else broad_objects())]
+    assert not {(e["source"], tuple(e["rpy_deg"])) for e in turned} & {(e["source"], tuple(e["rpy_deg"]))
+                                                                      for e in others}
+    parts = {e["source"] for e in turned if "random_urdfs" in e["source"]}
+    assert len(parts) == 6 and not parts & {e["source"] for e in others}
+    for path in write_worlds(tmp_path, set_file=turned_file):
+        load_world_spec(path)
+
+
 @pytest.mark.parametrize("name", ["mug", "torus", "jenga"])
 def test_an_object_has_its_size_and_stands_on_the_pedestal(open_world, tmp_path: Path, name: str) -> None:  # noqa: ANN001
     [path] = write_worlds(tmp_path, names=[name])
