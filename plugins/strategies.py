@@ -97,8 +97,7 @@ EXTRA = [
                   "Thesis IG/Quality over BS/HR candidates with the stop calibrated on the broad object set: "
                   "ĉ_m 95 %, or 90 % when BS/HR has no candidate left after a fallback view, or 99 % without the "
                   "support opening after a fallback view, or 80 % once ĉ_m stops growing and a fallback view was "
-                  "tried "
-                  "(c_a at the stop >= 97 % on every object).",
+                  "tried (c_a at the stop >= 97 % on every object).",
                   "boundary_hole", "ig_quality", "coverage_target", {}, {"omega": -1.0}, dict(CALIBRATED_TERMINATION)),
     make_strategy("vasquez/du", "Vasquez-Gomez deterministic utility (pos reg sur dist) over random views.",
                   "random", "area_factor", "unknown_below", {"count": 40}),

@@ -88,6 +88,14 @@ class CoverageTarget(Termination):
             return float(ctx.surface.coverage_border())
         return float(ctx.coverage_history[-1]) if ctx.coverage_history else float(ctx.surface.coverage_area())
 
+    def _offer_fallback(self, ctx: PlanningContext, reason: str, margin: float) -> Decision | None:
+        """``FALLBACK`` the first time a clause would stop before any view of the session's fallback
+        generator (over all directions) was scanned; None once one was, or without a fallback."""
+        if ctx.fallback_available and not ctx.fallback_scans and self.offered_at is None:
+            self.offered_at = ctx.iteration
+            return Decision(FALLBACK, f"{reason}: the fallback's views are offered first", margin=margin)
+        return None
+
     def decide(self, ctx: PlanningContext) -> Decision:
         c = self.estimate(ctx)
         d = float(ctx.density_history[-1]) if ctx.density_history else float(ctx.surface.mean_density())
@@ -99,10 +107,7 @@ class CoverageTarget(Termination):
                 and reaches(d, self.density):
             reason = f"no candidate left at ĉ_m = {c:.3f} >= {self.exhausted_coverage}, d̄_m = {d:.3f} >= {self.density}"
             margin = min(c - self.exhausted_coverage, d - self.density)
-            if ctx.fallback_available and not ctx.fallback_scans and self.offered_at is None:
-                self.offered_at = ctx.iteration
-                return Decision(FALLBACK, f"{reason}: the fallback's views are offered first", margin=margin)
-            return Decision(STOP, reason, SUCCESS, margin)
+            return self._offer_fallback(ctx, reason, margin) or Decision(STOP, reason, SUCCESS, margin)
         off = float(ctx.off_support_history[-1]) if ctx.off_support_history else 0.0
         if self.off_support_coverage > 0.0 and ctx.fallback_scans and reaches(off, self.off_support_coverage) \
                 and reaches(d, self.density):
@@ -121,9 +126,8 @@ class CoverageTarget(Termination):
                       f"d̄_m = {d:.3f} >= {self.density}")
             margin = min(self.saturation_delta - gain,
                          max(c - self.saturated_coverage, off - self.saturated_off_support))
-            if ctx.fallback_available and not ctx.fallback_scans and self.offered_at is None:
-                self.offered_at = ctx.iteration
-                return Decision(FALLBACK, f"{reason}: the fallback's views are offered first", margin=margin)
+            if offer := self._offer_fallback(ctx, reason, margin):
+                return offer
             if self.offered_at is None or ctx.iteration - self.offered_at >= 2:
                 return Decision(STOP, reason, SUCCESS, margin)
         if ctx.iteration >= self.n_abort:
