@@ -31,9 +31,26 @@ SENSORS = {
 }
 
 
+ENTRY_FIELDS = ("name", "source", "size", "rpy_deg", "kind")
+
+
 def broad_objects(set_file: Path = SET_FILE) -> list[dict[str, Any]]:
-    """The entries of ``broad_set.yaml`` (or of another set file of the same layout)."""
-    return list(yaml.safe_load(set_file.read_text())["objects"])
+    """The entries of ``broad_set.yaml`` (or of another set file of the same layout); ValueError naming the
+    file and the field for a file that is not such a set (the values are checked when the worlds load)."""
+    try:
+        data = yaml.safe_load(set_file.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
+        raise ValueError(f"{set_file}: not a readable YAML set file ({str(error).splitlines()[0]})") from None
+    entries = data.get("objects") if isinstance(data, dict) else None
+    if not isinstance(entries, list) or not entries:
+        raise ValueError(f"{set_file}: objects: expected a list of objects")
+    for index, entry in enumerate(entries):
+        missing = [key for key in ENTRY_FIELDS if not isinstance(entry, dict) or key not in entry]
+        if missing:
+            raise ValueError(f"{set_file}: objects[{index}]: missing {', '.join(missing)}")
+        if isinstance(entry["size"], bool) or not isinstance(entry["size"], int | float):
+            raise ValueError(f"{set_file}: objects[{index}].size: expected a number, got {entry['size']!r}")
+    return list(entries)
 
 
 def world_data(entry: dict[str, Any], sensor: str = "laser_striper") -> dict[str, Any]:

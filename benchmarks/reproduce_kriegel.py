@@ -373,16 +373,18 @@ def main(argv: list[str] | None = None) -> int:
         sensor_params.update(parse_assignment(item, "--sensor-param") for item in args.sensor_param)
     except BadInput as error:
         parser.error(str(error))
-    if sensor_params:
-        from explore.sim import load_world_spec
+    from explore.sim import load_world_spec
 
-        for world in worlds:
-            try:
-                sensor = load_world_spec(world).sensor
+    for world in worlds:  # every world (and --sensor-param) checked before the first run: one line, exit 2
+        try:
+            sensor = load_world_spec(world).sensor
+            if sensor_params:
                 registry.create("sensor", sensor.plugin, {**sensor.params, **sensor_params},
                                 "--profile" if list(sensor_params) == ["profile"] else "--sensor-param")
-            except BadInput as error:
-                parser.error(str(error))
+        except BadInput as error:
+            if args.set:  # the world was written from the set file: name that file and the object
+                error = BadInput(f"{set_file} ({Path(world).stem.removeprefix('broad_')})", error.field, error.message)
+            parser.error(error.line())
     if args.missing:
         try:
             Path(args.missing).mkdir(parents=True, exist_ok=True)

@@ -113,6 +113,28 @@ def test_a_sensor_parameter_of_the_benchmark_reaches_the_sensor_and_a_bad_one_is
     assert unshadowed[0] > shadowed[0]  # the camera's shadow costs returns in the same first scan
 
 
+@pytest.mark.parametrize(("text", "expected"), [
+    ("objects: [\n", "not a readable YAML set file"),
+    ("- 1\n", "objects: expected a list of objects"),
+    ("objects:\n  - {name: x}\n", "objects[0]: missing source, size, rpy_deg, kind"),
+    ("objects:\n  - {name: x, source: duck.obj, size: big, rpy_deg: [0, 0, 0], kind: a}\n",
+     "objects[0].size: expected a number, got 'big'"),
+    ("objects:\n  - {name: x, source: nope.obj, size: 0.1, rpy_deg: [0, 0, 0], kind: a}\n",
+     "(x): objects[0].source: file not found: 'nope.obj'"),
+])
+def test_a_bad_set_file_is_one_line_naming_the_file(tmp_path: Path, text: str, expected: str) -> None:
+    import subprocess
+
+    set_file = tmp_path / "set.yaml"
+    set_file.write_text(text)
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "reproduce_kriegel.py"
+    bad = subprocess.run([sys.executable, str(script), "--set", str(set_file), "--seeds", "0"],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
+    last = bad.stderr.strip().splitlines()[-1]
+    assert str(set_file) in last and expected in last, last
+
+
 def test_the_table_counts_scans_to_97_percent_and_compares_with_the_best_sphere_variant() -> None:
     """benchmarks/broad_table.py: n_97 is the first scan at c_a >= 97 % (budget + 1 if never), the
     best sphere variant is chosen per object, and the counts say which targets hold."""
