@@ -41,8 +41,9 @@ def stop_index(run: dict, rule: tuple[float, float, float], density: float, fall
     last W scans. Unlike the second clause it is replayed exactly (it reads the curve only), as the
     rule stood when it was chosen (0aec002): since then a saturation before any fallback view first
     offers the fallback's views and stops two scans later, and the clause also fires at ĉ_m without the
-    support opening >= ``saturated_off_support`` (``coverage_target``); a replay of recorded curves
-    models neither, so such a choice is checked by running it."""
+    support opening >= ``saturated_off_support`` (``coverage_target``), and since a73321b the second clause
+    too scans one fallback view before it stops; a replay of recorded curves models none of these, so
+    such a choice is checked by running it."""
     main, exhausted, off_support = rule
     est, off, dens, sources = run["coverage_estimate"], run["coverage_off_support"], run["density"], run["sources"]
     fallback_scans = 0

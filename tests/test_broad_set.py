@@ -10,12 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
 
 from broad_worlds import (  # noqa: E402
     FIELD_FILE,
     HELDOUT_FILE,
     PEDESTAL_TOP,
+    SET_FILE,
     broad_objects,
     missing_surface_png,
     write_worlds,
@@ -63,11 +65,14 @@ def test_the_field_objects_are_in_neither_set_and_every_world_loads(tmp_path: Pa
 def test_the_turned_objects_are_new_poses_or_new_parts_and_every_world_loads(tmp_path: Path) -> None:
     """benchmarks/turned_set.yaml (a check of the stop on unseen shapes): no object in a pose any other set
     has, its random parts in no other set."""
-    turned_file = Path(__file__).resolve().parents[1] / "benchmarks" / "turned_set.yaml"
+    turned_file = BENCHMARKS / "turned_set.yaml"
     turned = broad_objects(turned_file)
-    others = [e for f in (None, HELDOUT_FILE, FIELD_FILE) for e in (broad_objects(f) if f else broad_objects())]
-    assert not {(e["source"], tuple(e["rpy_deg"])) for e in turned} & {(e["source"], tuple(e["rpy_deg"]))
-                                                                      for e in others}
+    others = [e for f in (SET_FILE, HELDOUT_FILE, FIELD_FILE) for e in broad_objects(f)]
+
+    def poses(entries: list[dict]) -> set[tuple]:
+        return {(e["source"], tuple(e["rpy_deg"])) for e in entries}
+
+    assert not poses(turned) & poses(others)
     parts = {e["source"] for e in turned if "random_urdfs" in e["source"]}
     assert len(parts) == 6 and not parts & {e["source"] for e in others}
     for path in write_worlds(tmp_path, set_file=turned_file):
@@ -101,7 +106,7 @@ def test_a_sensor_parameter_of_the_benchmark_reaches_the_sensor_and_a_bad_one_is
 
     from reproduce_kriegel import run_one
 
-    script = Path(__file__).resolve().parents[1] / "benchmarks" / "reproduce_kriegel.py"
+    script = BENCHMARKS / "reproduce_kriegel.py"
     bad = subprocess.run([sys.executable, str(script), "--worlds", "bunny_pedestal", "--seeds", "0",
                           "--sensor-param", "camera_shadow=maybe"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2
@@ -127,7 +132,7 @@ def test_a_bad_set_file_is_one_line_naming_the_file(tmp_path: Path, text: str, e
 
     set_file = tmp_path / "set.yaml"
     set_file.write_text(text)
-    script = Path(__file__).resolve().parents[1] / "benchmarks" / "reproduce_kriegel.py"
+    script = BENCHMARKS / "reproduce_kriegel.py"
     bad = subprocess.run([sys.executable, str(script), "--set", str(set_file), "--seeds", "0"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
