@@ -44,6 +44,19 @@ def test_planner_avoids_a_known_obstacle(registry, workcell, endpoints) -> None:
     assert registry.get("motion_planner", "rrt_connect").create({}).plan(problem, endpoints[0], low) is None
 
 
+def test_ompl_failures_reach_the_caller_not_the_console(workcell, endpoints, capfd) -> None:
+    """OMPL writes its errors straight to stderr (through a live view); a failed search is a None."""
+    from explore.motion.geometric import ompl_search
+    from explore.motion.planning_clock import Budget
+
+    robot = workcell.robot
+    problem = MotionProblem(robot)
+    low = robot.ik(look_at([0.75, 0.0, 0.3], [0.75, 0.0, 0.0]), check_collision=False)
+    capfd.readouterr()
+    assert ompl_search(problem, endpoints[0], low, "rrt_connect", Budget(0.5), True, 0.0, 1e-6, 1.0) is None
+    assert capfd.readouterr().err == ""
+
+
 def _clearing_scan(lo: np.ndarray, hi: np.ndarray):
     """Vertical beams without a return through the box [lo, hi]: they prove it free."""
     from explore.sim import Scan

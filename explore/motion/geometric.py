@@ -39,11 +39,15 @@ OPTIONAL_GEOMETRIC: dict[str, str] = {"lazy_prm": "LazyPRM", "lazy_prm_star": "L
 
 # -- OMPL ------------------------------------------------------------------------------------
 def ompl_modules() -> tuple[Any, Any, Any]:
+    """OMPL's base, geometric and util modules, with OMPL's own console output off: it writes
+    straight to stderr (through a live view), and every failure it reports there (e.g. "Unable to
+    sample any valid states for goal tree") reaches the caller as a missing plan, which the
+    planners and sessions report in their own words."""
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
 
-    ou.setLogLevel(ou.LOG_ERROR)
+    ou.setLogLevel(ou.LOG_NONE)
     return ob, og, ou
 
 
@@ -51,11 +55,8 @@ def seed_ompl(seed: int | None) -> None:
     """Seed OMPL's global seed generator (deterministic planning for a given seed)."""
     if seed is None:
         return
-    _, _, ou = ompl_modules()
-    level = ou.getLogLevel()
-    ou.setLogLevel(ou.LOG_NONE)  # OMPL complains when RNGs exist already; reseeding still works
+    _, _, ou = ompl_modules()  # quiet: OMPL complains when RNGs exist already; reseeding still works
     ou.RNG.setSeed(max(1, int(seed)))
-    ou.setLogLevel(level)
 
 
 def real_vector_space(ob: Any, lower: Array, upper: Array) -> Any:
