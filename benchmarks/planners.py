@@ -204,9 +204,9 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
                     continue
                 done[(run.get("world", NBVS_WORLD), run["approach"], run["k"], run["seed"], run["max_views"],
                       run.get("relocalise", False), run.get("weighting", "probability"),
-                      run.get("leg_length", 0.25 if run.get("relocalise") else 0.0))] = run
+                      run.get("leg_length", 0.25 if run.get("relocalise") else 0.0), run.get("min_unknown", 30))] = run
     defaults = inspect.signature(NBVSSession).parameters
-    params = {name: defaults[name].default for name in ("relocalise", "weighting", "leg_length")}
+    params = {name: defaults[name].default for name in ("relocalise", "weighting", "leg_length", "min_unknown")}
     params.update(session_params or {})
     if not params["relocalise"]:
         params["leg_length"] = 0.0
@@ -214,7 +214,8 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
     for approach, expected, k, noise in configs:
         runs = []
         for seed in seed_list:
-            key = (world, approach, k, seed, views, params["relocalise"], params["weighting"], params["leg_length"])
+            key = (world, approach, k, seed, views, params["relocalise"], params["weighting"], params["leg_length"],
+                   params["min_unknown"])
             if key not in done:
                 t0 = time.perf_counter()
                 with Simulation(world, registry) as sim:
@@ -295,6 +296,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--open-loop", action="store_true",
                         help="NBVS motions executed open loop, as in the paper (default: re-localising)")
     parser.add_argument("--weighting", choices=("mean", "probability"), default="mean", help="EU weights")
+    parser.add_argument("--min-unknown", type=int, default=None,
+                        help="unknown voxels a candidate must see (default: the session's 30, the paper's real-robot "
+                             "stop, Table 7; 0: only the 12-view budget, the paper's simulation protocol, Sec. A9)")
     parser.add_argument("--leg-length", type=float, default=None,
                         help="re-localising, also re-aim drives every this many metres (default: the session's)")
     args = parser.parse_args(argv)
@@ -305,6 +309,8 @@ def main(argv: list[str] | None = None) -> int:
         ks = tuple(int(k) for k in args.ks.split(",") if k)
     except ValueError:
         parser.error(f"--ks: comma-separated integers expected, got {args.ks!r}")
+    if args.min_unknown is not None and args.min_unknown < 0:
+        parser.error(f"--min-unknown: must be >= 0, got {args.min_unknown}")
     if args.leg_length is not None and args.leg_length < 0.0:
         parser.error(f"--leg-length: must be >= 0, got {args.leg_length}")
     try:
@@ -330,7 +336,8 @@ def main(argv: list[str] | None = None) -> int:
             rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,
                               args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
                               {"relocalise": not args.open_loop, "weighting": args.weighting,
-                               **({} if args.leg_length is None else {"leg_length": args.leg_length})})
+                               **({} if args.leg_length is None else {"leg_length": args.leg_length}),
+                               **({} if args.min_unknown is None else {"min_unknown": args.min_unknown})})
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
