@@ -115,6 +115,8 @@ def test_third_party_plugin_is_listed_with_its_origin_and_created_with_params() 
         reg.create("sensor", "extra_sensor", {"gain": -1})
     with pytest.raises(BadInput, match=r"unknown parameter \(valid: gain\)"):
         reg.create("sensor", "extra_sensor", {"gian": 1})
+    with pytest.raises(BadInput, match=r"unknown parameter \(YAML reads 'gain:2' as one name: write 'gain: \.\.\.'\)"):
+        reg.create("sensor", "extra_sensor", {"gain:2": None})  # what YAML makes of {gain:2}
 
 
 def test_parameters_convert_units_and_reject_wrong_ones() -> None:

@@ -158,7 +158,10 @@ def validate_params(
     unknown = sorted(set(given) - set(declared))
     if unknown:
         valid = ", ".join(sorted(declared)) or "none"
-        raise BadInput(source, f"{prefix}{unknown[0]}", f"unknown parameter (valid: {valid})")
+        name = str(unknown[0])
+        key, sep, _ = name.partition(":")
+        hint = f" (YAML reads '{name}' as one name: write '{key}: ...')" if sep and key.strip() in declared else ""
+        raise BadInput(source, f"{prefix}{name}", f"unknown parameter{hint} (valid: {valid})")
     out = {name: p.default for name, p in declared.items()}
     for name, p in declared.items():
         if p.presets:
