@@ -297,8 +297,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="NBVS motions executed open loop, as in the paper (default: re-localising)")
     parser.add_argument("--weighting", choices=("mean", "probability"), default="mean", help="EU weights")
     parser.add_argument("--min-unknown", type=int, default=None,
-                        help="unknown voxels a candidate must see (default: the session's 30, the paper's real-robot "
-                             "stop, Table 7; 0: only the 12-view budget, the paper's simulation protocol, Sec. A9)")
+                        help="unknown voxels a candidate must see (default: the session's 30, the paper's stop with "
+                             "the real robot's parameters, Table 7, which its Table 6 used; 0: the 12-view budget ends "
+                             "a run, as in the paper's simulations of Table 5 and Fig. 12)")
     parser.add_argument("--leg-length", type=float, default=None,
                         help="re-localising, also re-aim drives every this many metres (default: the session's)")
     args = parser.parse_args(argv)
