@@ -194,6 +194,8 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
     configs = [("DU", False, 1, False), ("DU-MU", False, 1, True)] + [("EU-MU", True, k, True) for k in ks]
     if approaches:
         configs = [c for c in configs if c[0] in approaches]
+    defaults = inspect.signature(NBVSSession).parameters
+    params = {name: defaults[name].default for name in ("relocalise", "weighting", "leg_length", "min_unknown")}
     done: dict[tuple, dict[str, Any]] = {}
     if runs_file and os.path.exists(runs_file):
         with open(runs_file, encoding="utf-8") as handle:
@@ -204,9 +206,8 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
                     continue
                 done[(run.get("world", NBVS_WORLD), run["approach"], run["k"], run["seed"], run["max_views"],
                       run.get("relocalise", False), run.get("weighting", "probability"),
-                      run.get("leg_length", 0.25 if run.get("relocalise") else 0.0), run.get("min_unknown", 30))] = run
-    defaults = inspect.signature(NBVSSession).parameters
-    params = {name: defaults[name].default for name in ("relocalise", "weighting", "leg_length", "min_unknown")}
+                      run.get("leg_length", 0.25 if run.get("relocalise") else 0.0),
+                      run.get("min_unknown", params["min_unknown"]))] = run  # older records: the session default
     params.update(session_params or {})
     if not params["relocalise"]:
         params["leg_length"] = 0.0
@@ -337,8 +338,9 @@ def main(argv: list[str] | None = None) -> int:
             rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,
                               args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
                               {"relocalise": not args.open_loop, "weighting": args.weighting,
-                               **({} if args.leg_length is None else {"leg_length": args.leg_length}),
-                               **({} if args.min_unknown is None else {"min_unknown": args.min_unknown})})
+                               **{name: value for name, value in (("leg_length", args.leg_length),
+                                                                  ("min_unknown", args.min_unknown))
+                                  if value is not None}})
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
