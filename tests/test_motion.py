@@ -399,6 +399,39 @@ def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(open_world) -> Non
         assert min(gaps) >= 0.2 - 0.03  # surface samples every 3 cm
 
 
+def test_the_clustered_planar_kernel_gives_the_clearance_and_grid_points_of_every_point() -> None:
+    """17 000 robot points moved to 500 random base poses among two boxes and beside a grid box: the
+    kernel, which skips clusters far from both, returns the brute-force smallest distance whenever it is
+    below ``reach`` (inf otherwise) and exactly the moved points inside the grid."""
+    from explore.motion.kernels import planar_points_clearance, point_clusters
+    from explore.motion.mobile import box_distance
+
+    rng = np.random.default_rng(0)
+    local, z = rng.uniform(-0.5, 0.5, (17000, 2)), rng.uniform(0.0, 1.2, 17000)
+    clusters = point_clusters(local, z)
+    assert len(clusters[3]) < len(local) / 10 and clusters[2][-1] == len(local)
+    radius = float(np.sqrt((local**2).sum(axis=1)).max())
+    lo, hi = np.array([[0.8, -0.3, 0.0], [-1.5, 1.0, 0.0]]), np.array([[1.2, 0.3, 0.7], [-1.0, 1.5, 1.0]])
+    grid_lo, grid_hi = np.array([0.3, -2.0, 0.5]), np.array([2.0, 2.0, 2.0])
+    out, near, inside_seen = np.empty((len(local), 3)), 0, 0
+    for _ in range(500):
+        x, y, theta, reach = rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5), rng.uniform(-3, 3), rng.uniform(0.01, 0.3)
+        c, s = math.cos(theta), math.sin(theta)
+        moved = np.column_stack([c * local[:, 0] - s * local[:, 1] + x, s * local[:, 0] + c * local[:, 1] + y, z])
+        distance = float(box_distance(moved, lo, hi).min())
+        inside = moved[np.all((moved >= grid_lo) & (moved <= grid_hi), axis=1)]
+        clearance, m = planar_points_clearance(*clusters, radius, x, y, theta, lo, hi, reach, grid_lo, grid_hi, out)
+        if distance < reach:
+            assert clearance == pytest.approx(max(distance, 0.0), abs=1e-12)
+            near += 1
+        else:
+            assert clearance == np.inf
+        assert m == len(inside)
+        np.testing.assert_array_equal(np.sort(out[:m], axis=0), np.sort(inside, axis=0))
+        inside_seen += m > 0
+    assert near > 20 and inside_seen > 100  # both branches were exercised
+
+
 def test_a_base_pose_is_blocked_by_a_wall_in_the_sparse_pvs_as_the_full_test_finds(open_world) -> None:
     """A wall of occupied voxels in a room-sized sparse PVS, 1.2 m ahead of the mobile manipulator: along a
     drive through it the planar checker (moved surface samples, the PVS's block bitmap) gives the verdict of

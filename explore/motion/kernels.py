@@ -21,18 +21,46 @@ def _box_sq_distance(x: float, y: float, z: float, lo: np.ndarray, hi: np.ndarra
     return gx * gx + gy * gy + gz * gz
 
 
+def point_clusters(local: np.ndarray, z: np.ndarray, cell: float = 0.1) -> tuple[np.ndarray, ...]:
+    """Group base-frame points (n, 2) + heights (n,) by the ``cell``-sized cube they fall in.
+
+    Returns the points and heights sorted by cluster, the clusters' start offsets (m + 1,),
+    their centres (m, 3) and the radii (m,) of the balls about those centres that hold them,
+    for :func:`planar_points_clearance` to skip whole clusters.
+    """
+    if len(local) == 0:
+        return local, z, np.zeros(1, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+    cells = np.floor(np.column_stack([local, z]) / cell).astype(np.int64)
+    cells -= cells.min(axis=0)
+    _, label = np.unique(np.ravel_multi_index(cells.T, cells.max(axis=0) + 1), return_inverse=True)
+    order = np.argsort(label, kind="stable")
+    local, z, label = local[order], z[order], label[order]
+    starts = np.searchsorted(label, np.arange(label[-1] + 2)).astype(np.int64)
+    xyz = np.column_stack([local, z])
+    lo = np.minimum.reduceat(xyz, starts[:-1])
+    hi = np.maximum.reduceat(xyz, starts[:-1])
+    centres = 0.5 * (lo + hi)
+    radii = np.sqrt(np.maximum.reduceat(((xyz - np.repeat(centres, np.diff(starts), axis=0)) ** 2).sum(axis=1),
+                                        starts[:-1]))
+    return (np.ascontiguousarray(local), np.ascontiguousarray(z), starts, np.ascontiguousarray(centres),
+            np.ascontiguousarray(radii))
+
+
 @njit(cache=True)
 def planar_points_clearance(
-    local: np.ndarray, z: np.ndarray, radius: float, x: float, y: float, theta: float, lo: np.ndarray,
-    hi: np.ndarray, reach: float, box_lo: np.ndarray, box_hi: np.ndarray, out: np.ndarray,
+    local: np.ndarray, z: np.ndarray, starts: np.ndarray, centres: np.ndarray, radii: np.ndarray, radius: float,
+    x: float, y: float, theta: float, lo: np.ndarray, hi: np.ndarray, reach: float, box_lo: np.ndarray,
+    box_hi: np.ndarray, out: np.ndarray,
 ) -> tuple[float, int]:
-    """Move base-frame points (n, 2) + heights (n,) to base pose (x, y, theta) into ``out`` (n, 3).
+    """Move base-frame points (n, 2) + heights (n,), grouped by :func:`point_clusters`, to base pose
+    (x, y, theta).
 
-    Returns the smallest distance from a point to the boxes [lo_b, hi_b] (inf when none is
-    nearer than ``reach``: boxes whose xy rectangle is farther than ``radius`` + ``reach``
-    from (x, y), ``radius`` bounding the points' distance from the base axis, are skipped)
-    and the number m of points inside the box [box_lo, box_hi] (the PVS grid): ``out[:m]``
-    holds those in their order, ``out[m:]`` the others.
+    Returns the smallest distance from a point to the boxes [lo_b, hi_b] if it is below ``reach``
+    (inf otherwise) and the number m of points inside the box [box_lo, box_hi] (the PVS grid), which
+    ``out[:m]`` (n, 3) receives. Boxes whose xy rectangle is farther than ``radius`` (the points'
+    largest distance from the base axis) + ``reach`` from (x, y) are skipped, and so is every cluster
+    whose ball keeps ``reach`` from the remaining boxes and lies outside the grid: a base far from
+    furniture and from the grid costs one pass over the clusters, not over the points.
     """
     c, s = math.cos(theta), math.sin(theta)
     near = np.empty(lo.shape[0], dtype=np.int64)
@@ -42,24 +70,34 @@ def planar_points_clearance(
         if gx * gx + gy * gy <= (radius + reach) ** 2:
             near[count] = b
             count += 1
-    best = np.inf
-    inside, outside = 0, local.shape[0]
-    for i in range(local.shape[0]):
-        px = c * local[i, 0] - s * local[i, 1] + x
-        py = s * local[i, 0] + c * local[i, 1] + y
-        pz = z[i]
-        for k in range(count):
-            d = _box_sq_distance(px, py, pz, lo, hi, near[k])
-            if d < best:
-                best = d
-        if box_lo[0] <= px <= box_hi[0] and box_lo[1] <= py <= box_hi[1] and box_lo[2] <= pz <= box_hi[2]:
-            j = inside
-            inside += 1
-        else:
-            outside -= 1
-            j = outside
-        out[j, 0], out[j, 1], out[j, 2] = px, py, pz
-    return math.sqrt(best), inside
+    best, inside = reach * reach, 0
+    for k in range(centres.shape[0]):
+        cx = c * centres[k, 0] - s * centres[k, 1] + x
+        cy = s * centres[k, 0] + c * centres[k, 1] + y
+        cz = centres[k, 2]
+        near_box = False
+        for j in range(count):
+            if _box_sq_distance(cx, cy, cz, lo, hi, near[j]) <= (reach + radii[k]) ** 2:
+                near_box = True
+                break
+        gx, gy, gz = _gap(cx, box_lo[0], box_hi[0]), _gap(cy, box_lo[1], box_hi[1]), _gap(cz, box_lo[2], box_hi[2])
+        in_grid = gx * gx + gy * gy + gz * gz <= radii[k] * radii[k]
+        if not near_box and not in_grid:
+            continue
+        for i in range(starts[k], starts[k + 1]):
+            px = c * local[i, 0] - s * local[i, 1] + x
+            py = s * local[i, 0] + c * local[i, 1] + y
+            pz = z[i]
+            if near_box:
+                for j in range(count):
+                    d = _box_sq_distance(px, py, pz, lo, hi, near[j])
+                    if d < best:
+                        best = d
+            if in_grid and box_lo[0] <= px <= box_hi[0] and box_lo[1] <= py <= box_hi[1] \
+                    and box_lo[2] <= pz <= box_hi[2]:
+                out[inside, 0], out[inside, 1], out[inside, 2] = px, py, pz
+                inside += 1
+    return (math.sqrt(best) if best < reach * reach else np.inf), inside
 
 
 @njit(cache=True)

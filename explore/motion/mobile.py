@@ -11,7 +11,7 @@ import numpy as np
 
 from explore.core import Array, Points3, wrap_angle
 from explore.motion.geometric import ompl_search, plan, seed_ompl
-from explore.motion.kernels import planar_points_clearance
+from explore.motion.kernels import planar_points_clearance, point_clusters
 from explore.motion.planning_clock import Budget, charge
 from explore.motion.problem import MotionProblem, check_path_until, path_length
 from explore.motion.records import MotionPlan
@@ -65,6 +65,7 @@ class PlanarChecker:
                                                            -s * rel[:, 0] + c * rel[:, 1]]))
         self.radius = float(np.sqrt((self.local**2).sum(axis=1)).max(initial=0.0))
         self.z = np.ascontiguousarray(points[:, 2])
+        self._clusters = point_clusters(self.local, self.z)
         self.margin = problem.margin
         self.drive_margin = max(float(drive_margin), self.margin)
         self.ends = np.array([np.asarray(e, dtype=float)[:2] for e in ends]).reshape(-1, 2)
@@ -105,7 +106,7 @@ class PlanarChecker:
             to_end = float(np.sqrt(((self.ends - qb[:2]) ** 2).sum(axis=1)).min(initial=np.inf))
             drive = min(self.drive_margin, self.margin + to_end)
         clearance, inside = planar_points_clearance(
-            self.local, self.z, self.radius, float(qb[0]), float(qb[1]), float(qb[2]), self.lo, self.hi,
+            *self._clusters, self.radius, float(qb[0]), float(qb[1]), float(qb[2]), self.lo, self.hi,
             max(drive, self.margin + self.slack), self._box[0], self._box[1], self._points)
         if clearance < drive - 1e-12 and drive > self.margin:  # the funnel, measured to the bounding boxes
             return False
