@@ -32,9 +32,8 @@ def samples(count: int, log: Any) -> list[dict[str, Any]]:
     """One record per plan: world, planner, wall seconds and the units charged."""
     from planners import _queries
 
-    from explore import planning_clock
     from explore.mapping import PVS
-    from explore.motion import MotionProblem
+    from explore.motion import MotionProblem, planning_clock
     from explore.runtime import Registry
     from explore.sim import Simulation
 
