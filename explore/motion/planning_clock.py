@@ -19,7 +19,9 @@ from contextlib import contextmanager
 from typing import Any
 
 # Nominal seconds per unit of work, fitted to wall time by benchmarks/planning_clock.py (2 cores, no load:
-# 4.7-5.4e-4, 1.3e-4 and ~0 s); a work limit then lasts 0.7-1.9 times as long in wall time (docs/results.md).
+# 4.7-5.4e-4, 1.3e-4 and ~0 s); a work limit then lasted 0.7-1.9 times as long in wall time. The checks got
+# faster since (at 8b27dfb a limit lasts 0.18-0.42 times as long, docs/results.md); the costs are kept so
+# that the same seed still gives the same plans as the measured runs.
 COSTS: dict[str, float] = {
     "state": 4.0e-4,  # MotionProblem.is_valid: pybullet pair tests and the PVS points of one configuration
     "planar": 1.0e-4,  # PlanarChecker: one rigid base pose against boxes (numba) and the PVS
