@@ -139,7 +139,8 @@ def test_unreachable_initial_scan_fails_with_metrics(tmp_path, capsys) -> None:
     code, m, _ = _run(["model_object", "--world", "bunny_pedestal", "--robot", "mobile_base",
                        "--out", str(tmp_path / "r")], capsys)
     assert code == 1 and m["status"] == "failure" and m["scans"] == 0
-    assert m["reason"] == "Plan initial scan: no reachable initial scan (13 initial scans tried: 13 unreachable)"
+    assert m["reason"] == ("Plan initial scan: no reachable initial scan (13 initial scans tried: 13 unreachable; "
+                           "they stand 0.325 m from the region, the sensor's optimal distance)")
     assert m["planning_attempts"] == 13 and m["planning_success"] == 0.0
     assert m["objects"][0]["result"] == "not_seen" and m["files"]["mesh"] is None
 

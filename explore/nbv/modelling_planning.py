@@ -121,7 +121,8 @@ class CandidatePlanning:
                 self._pend_candidate(candidate)
                 return result
             failures.append(result)
-        self.plan_failure = failure_summary("initial scans", failures)
+        self.plan_failure = (f"{failure_summary('initial scans', failures)}; they stand "
+                             f"{self.sensor.optimal_distance:.3g} m from the region, the sensor's optimal distance")
         return None
 
     def plan_best(self, candidate: Candidate | None) -> ScanPlan | None:
