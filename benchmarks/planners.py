@@ -175,7 +175,7 @@ def planner_rows(full: bool, log: Any, worlds: tuple[str, ...] = (), planners: t
 NBVS_WORLD = "cluttered"
 
 
-def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...] = (), views: int | None = None,
+def nbvs_rows(full: bool, log: Any, seeds: list[int] | None = None, ks: tuple[int, ...] = (), views: int | None = None,
               runs_file: str | None = None, approaches: tuple[str, ...] = (), world: str = NBVS_WORLD,
               session_params: dict[str, Any] | None = None) -> list[dict[str, Any]]:
     """Vasquez-Gomez Table 5: DU (no noise), DU-MU and EU-MU for each k, one row per approach.
@@ -188,7 +188,7 @@ def nbvs_rows(full: bool, log: Any, seeds: int | None = None, ks: tuple[int, ...
     from explore.sim import Simulation
 
     registry = Registry.load()
-    seed_list = range(seeds or (10 if full else 5))
+    seed_list = seeds or range(10 if full else 5)
     ks = ks or ((1, 10, 100, 500) if full else (1, 100, 500))
     views = views or 12
     configs = [("DU", False, 1, False), ("DU-MU", False, 1, True)] + [("EU-MU", True, k, True) for k in ks]
@@ -288,7 +288,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worlds", default="", help="comma-separated subset of the planner worlds")
     parser.add_argument("--planners", default="", help="comma-separated subset of the planners")
     parser.add_argument("--queries", type=int, default=None, help="queries per world (15; --full 30)")
-    parser.add_argument("--seeds", type=int, default=None, help="NBVS runs per approach (5; --full 10)")
+    parser.add_argument("--seeds", default=None,
+                        help="NBVS seeds per approach: N (0..N-1), a range A-B or a list a,b,c (5; --full 10)")
     parser.add_argument("--ks", default="", help="comma-separated k of EU-MU (1,100,500; --full 1,10,100,500)")
     parser.add_argument("--views", type=int, default=None, help="planned views per NBVS run (12, as the paper)")
     parser.add_argument("--approaches", default="", help="subset of DU,DU-MU,EU-MU")
@@ -315,13 +316,19 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--min-unknown: must be >= 0, got {args.min_unknown}")
     if args.leg_length is not None and args.leg_length < 0.0:
         parser.error(f"--leg-length: must be >= 0, got {args.leg_length}")
-    try:
-        from explore.core import BadInput
-        from explore.sim import find_world
+    from explore_cli.compare_cmd import parse_seeds
 
+    from explore.core import BadInput
+    from explore.sim import find_world
+
+    try:
         find_world(args.nbvs_world)
     except BadInput as error:
         parser.error(f"--nbvs-world: {error}")
+    try:
+        seeds = None if args.seeds is None else parse_seeds(args.seeds)
+    except BadInput as error:
+        parser.error(str(error))
 
     def log(line: str) -> None:
         if not args.json:
@@ -335,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
         from explore.motion import work_clock
 
         with work_clock():  # the runs' limits in work done: the same seed gives the same row under any load
-            rows += nbvs_rows(args.full, log, args.seeds, ks, args.views,
+            rows += nbvs_rows(args.full, log, seeds, ks, args.views,
                               args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
                               {"relocalise": not args.open_loop, "weighting": args.weighting,
                                **{name: value for name, value in (("leg_length", args.leg_length),
