@@ -23,14 +23,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-
-
-def seeds_of(text: str) -> set[int]:
-    out: set[int] = set()
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out.update(range(int(lo), int(hi or lo) + 1))
-    return out
+from reproduce_kriegel import parse_seeds
 
 
 def stop_index(run: dict, rule: tuple[float, float, float], density: float, fallback: str,
@@ -123,8 +116,8 @@ def main() -> None:
         runs = [r for r in json.loads(args.runs.read_text()) if r.get("coverage_off_support")]
     except (OSError, ValueError, AttributeError, TypeError) as error:
         parser.error(f"{args.runs}: not a reproduce_kriegel.py --runs-json file ({error})")
-    fit = [r for r in runs if r["seed"] in seeds_of(args.fit)]
-    check = [r for r in runs if r["seed"] in seeds_of(args.check)]
+    fit = [r for r in runs if r["seed"] in set(parse_seeds(args.fit))]
+    check = [r for r in runs if r["seed"] in set(parse_seeds(args.check))]
     if not check or not (fit or args.rule):
         seeds = sorted({r["seed"] for r in runs})
         parser.error(f"{args.runs}: no runs of seeds {args.check if not check else args.fit} (it has seeds {seeds})")

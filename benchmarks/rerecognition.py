@@ -26,14 +26,9 @@ import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from reproduce_kriegel import parse_seeds
+
 EXPLORE = Path(sys.executable).parent / "explore"
-
-
-def _seeds(text: str) -> list[int]:
-    if "-" in text:
-        lo, hi = text.split("-")
-        return list(range(int(lo), int(hi) + 1))
-    return [int(s) for s in text.split(",") if s]
 
 
 def _run(world: str, seed: int, db: Path, out: Path) -> dict:
@@ -137,7 +132,7 @@ def main() -> int:
     worlds = [w for w in args.worlds.split(",") if w]
     with tempfile.TemporaryDirectory(prefix="rerecognition-") as tmp, ThreadPoolExecutor(args.jobs) as pool:
         futures = [pool.submit(one_seed, args.first, worlds, seed, Path(tmp) / str(seed))
-                   for seed in _seeds(args.seeds)]
+                   for seed in parse_seeds(args.seeds)]
         rows = [row for future in futures for row in future.result()]
     calls = [c for r in rows for c in r["q_h_calls"]]
     if args.plot:
