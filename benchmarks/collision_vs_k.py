@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 REQUIRED = ("approach", "k", "collisions", "trajectories", "final_coverage", "views", "seed")
+# settings every run of one figure shares (older records lack some: planners.py's defaults then)
+SHARED = {"world": "cluttered", "max_views": 12, "min_unknown": 30, "weighting": "probability"}
 
 
 def read_runs(paths: list[str]) -> list[dict[str, Any]]:
@@ -44,6 +46,11 @@ def read_runs(paths: list[str]) -> list[dict[str, Any]]:
             runs.append(run)
     if not runs:
         raise ValueError(f"{', '.join(paths)}: no runs")
+    for key, default in SHARED.items():
+        values = sorted({str(run.get(key, default)) for run in runs})
+        if len(values) > 1:
+            raise ValueError(f"{', '.join(paths)}: runs of different {key} ({', '.join(values)}) in one figure; "
+                             "give the runs of one setting")
     return runs
 
 

@@ -50,3 +50,13 @@ def test_a_bad_runs_file_gets_one_line_and_exit_2(tmp_path: Path, capsys, conten
     assert says in err and len(err.strip().splitlines()) == 1
     assert main([str(tmp_path / "missing.jsonl")]) == 2
     assert "missing.jsonl: cannot read" in capsys.readouterr().err
+
+
+def test_runs_of_different_settings_are_not_mixed_in_one_figure(tmp_path: Path, capsys) -> None:
+    budget_only = {**_run("EU-MU", 500, 0, 0, 12, 0.9, True), "min_unknown": 0}
+    with_stop = _run("EU-MU", 500, 1, 0, 8, 0.8, True)  # an older record: the session's 30
+    path = tmp_path / "runs.jsonl"
+    path.write_text("\n".join(json.dumps(r) for r in (budget_only, with_stop)) + "\n", encoding="utf-8")
+    assert main([str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "different min_unknown (0, 30)" in err and len(err.strip().splitlines()) == 1
