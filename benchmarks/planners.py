@@ -183,6 +183,7 @@ def nbvs_rows(full: bool, log: Any, seeds: list[int] | None = None, ks: tuple[in
     Every finished run is appended to ``runs_file`` (JSON lines) and found there again on a
     re-run with the same settings, so a long grid can be stopped and resumed.
     """
+    from explore.motion import wall_guard_stops, work_clock
     from explore.nbv import NBVSSession
     from explore.runtime import Registry
     from explore.sim import Simulation
@@ -219,14 +220,17 @@ def nbvs_rows(full: bool, log: Any, seeds: list[int] | None = None, ks: tuple[in
                    params["min_unknown"])
             if key not in done:
                 t0 = time.perf_counter()
-                with Simulation(world, registry) as sim:
+                # each run's limits in work done from 0, as `explore run`: the same seed gives the same record
+                # under any load and after any other run
+                with work_clock(), Simulation(world, registry) as sim:
                     session = NBVSSession(sim, registry, expected=expected, k=k, seed=seed, max_views=views,
                                           noise=noise, **params)
                     summary = session.run(lambda r, a=approach, s=seed, kk=k: log(
                         f"  {a} k={kk} seed {s} view {r.index}: coverage {r.coverage:.3f}  collided {r.collided}  "
                         f"ess {r.ess if r.ess is None else round(r.ess, 1)}  stages {r.stages}"))
+                    guard_stops = wall_guard_stops()
                 summary.update({"world": world, **params, "approach": approach, "k": k, "seed": seed,
-                                "max_views": views,
+                                "max_views": views, "wall_guard_stops": guard_stops,
                                 "seconds": time.perf_counter() - t0, "travelled_m": session.travelled_m()})
                 summary = json.loads(json.dumps(summary, default=float))
                 done[key] = summary
@@ -252,6 +256,7 @@ def nbvs_rows(full: bool, log: Any, seeds: list[int] | None = None, ks: tuple[in
             "seconds_per_run": float(np.mean([r["seconds"] for r in runs])),
             "median_s_per_view": float(np.median([t for r in runs for t in r.get("seconds_per_view", [])] or [np.nan])),
             "travelled_m_per_run": float(np.mean([r["travelled_m"] for r in runs])),
+            "wall_guard_stops": sum(r.get("wall_guard_stops", 0) for r in runs),  # older records: not counted
         })
     return rows
 
@@ -339,15 +344,12 @@ def main(argv: list[str] | None = None) -> int:
         rows += planner_rows(args.full, log, worlds,
                              tuple(p for p in args.planners.split(",") if p), args.queries)
     if args.part in ("all", "nbvs"):
-        from explore.motion import work_clock
-
-        with work_clock():  # the runs' limits in work done: the same seed gives the same row under any load
-            rows += nbvs_rows(args.full, log, seeds, ks, args.views,
-                              args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
-                              {"relocalise": not args.open_loop, "weighting": args.weighting,
-                               **{name: value for name, value in (("leg_length", args.leg_length),
-                                                                  ("min_unknown", args.min_unknown))
-                                  if value is not None}})
+        rows += nbvs_rows(args.full, log, seeds, ks, args.views,
+                          args.runs_file, tuple(a for a in args.approaches.split(",") if a), args.nbvs_world,
+                          {"relocalise": not args.open_loop, "weighting": args.weighting,
+                           **{name: value for name, value in (("leg_length", args.leg_length),
+                                                              ("min_unknown", args.min_unknown))
+                              if value is not None}})
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
