@@ -399,6 +399,35 @@ def test_a_drive_keeps_its_drive_clearance_away_from_its_ends(open_world) -> Non
         assert min(gaps) >= 0.2 - 0.03  # surface samples every 3 cm
 
 
+def test_a_drive_goal_only_the_denser_drive_check_refuses_fails_at_once(open_world) -> None:
+    """An unknown speck on the robot at the goal pose that the 3 cm points of ``is_valid`` miss and the
+    1.5 cm points of the drive's checker hit: the goal passes ``is_valid``, no drive can end there, and
+    the plan fails on its work budget, not by idling until the wall-time hang guard (OMPL's
+    RRT-Connect waits 10 ms per try for a valid goal sample)."""
+    from scipy.spatial import cKDTree
+
+    from explore.motion import PlanarChecker, plan_mobile, wall_guard_stops, work_clock
+
+    with open_world("cluttered") as sim:
+        robot = sim.robot
+        start, goal = robot.q.copy(), robot.q.copy()
+        goal[:3] = (1.5, 1.2, 3.0)
+        dense, sparse = robot.link_points(goal, spacing=0.015), robot.link_points(goal)
+        gaps = cKDTree(sparse).query(dense)[0]
+        speck, radius = dense[np.argmax(gaps)], 0.5 * float(gaps.max())
+        assert radius > 0.003
+
+        def space_free(points: np.ndarray) -> np.ndarray:
+            return np.linalg.norm(points - speck, axis=1) >= radius
+
+        problem = MotionProblem(robot, space_free=space_free)
+        assert problem.is_valid(start) and problem.is_valid(goal)
+        assert not PlanarChecker(problem, goal)(goal[:3])
+        with work_clock():
+            found = plan_mobile(problem, start, goal, time_limit=1.0, seed=1, tuck=False)
+            assert found is None and wall_guard_stops() == 0
+
+
 def test_the_clustered_planar_kernel_gives_the_clearance_and_grid_points_of_every_point() -> None:
     """17 000 robot points moved to 500 random base poses among two boxes and beside a grid box: the
     kernel, which skips clusters far from both, returns the brute-force smallest distance whenever it is

@@ -244,6 +244,12 @@ def mobile_plan(
         if first is None:
             continue
         sub = BaseProblem(problem, carried, goal[base], lower, upper)
+        if not sub.is_valid(goal[base]):
+            # The drive's checker samples the robot every 1.5 cm, is_valid (which chose the carried joints)
+            # every 3 cm, so it can refuse the goal pose. No drive ends there, and OMPL's bidirectional
+            # planners would wait for a valid goal sample until the limit (PlannerInputStates::nextGoal
+            # sleeps 10 ms per try), which then only the wall-time hang guard ends.
+            continue
         driven = drive(sub, carried[base], goal[base], budget)
         if driven is None:
             continue
