@@ -31,18 +31,23 @@ _DEPTH_PROFILES = {
     # Kinect v1-like structured light (Khoshelham & Elberink 2012; Nguyen et al. 2012)
     "kinect": {"noise": "kinect", "disparity_step": 0.125, "disparity_width": 640, "projector_shadow": True,
                "flying_pixels": 0.5, "edge_jump": 0.02, "bias_sigma": 0.5, "patch_sigma": 0.7, "patch_px": 2.0,
-               "grazing_from_deg": 60.0, "dark_level": 30.0, "no_return_clears": False},
+               "grazing_from_deg": 60.0, "dark_level": 30.0, "highlight_deg": 10.0, "no_return_clears": False},
     # Kinect v2-like time of flight: every edge pixel mixes, flat noise, no projector baseline
     "tof": {"noise": "tof", "flying_pixels": 1.0, "edge_jump": 0.02, "bias_sigma": 0.5, "grazing_from_deg": 70.0,
-            "dark_level": 50.0, "no_return_clears": False},
+            "dark_level": 50.0, "highlight_deg": 10.0, "no_return_clears": False},
 }
+
+# glossy surfaces (a world body's ``specular``): both sensors lose the returns in the highlight
+_HIGHLIGHT = Param("highlight_deg", float, 0.0, "deg", "a glossy surface's highlight (the mirror reflection of the "
+                   "emitter's light within this angle of the receiver) saturates the sensor: no return, with the "
+                   "probability of the surface's `specular` share (0: off)", low=0.0, high=90.0)
 
 
 class DepthCamera(RaySensor):
     """Pinhole depth camera (RGB-D when ``color``), noise none / Kinect sigma(d) ~ d^2 / time of flight /
     laser Eq. 4.39; the artefacts of real devices (explore.sim.artefacts), switched on together by a
     ``profile``: ``kinect`` (structured light: disparity quantisation, projector shadows, flying pixels,
-    grazing and dark-surface dropouts, a per-frame bias and correlated patches) or ``tof``."""
+    grazing, dark-surface and glossy-highlight dropouts, a per-frame bias and correlated patches) or ``tof``."""
 
     name = "depth_camera"
     geometry = "area"
@@ -65,6 +70,7 @@ class DepthCamera(RaySensor):
         Param("color", bool, False, "", "add colour from pybullet's renderer"),
         Param("dark_level", float, 0.0, "", "surface grey level (0-255) x cos(incidence) below which returns "
               "thin out in proportion (0: off)", low=0.0, high=255.0),
+        _HIGHLIGHT,
         Param("baseline", float, 0.075, "m", "projector to camera distance along the camera's x axis", low=1e-4),
         Param("disparity_step", float, 0.0, "px", "disparity quantisation step (Kinect: 0.125; 0: none)", low=0.0),
         Param("disparity_width", int, 0, "px", "width of the image the device matches disparities in (Kinect: 640; "
@@ -193,15 +199,15 @@ _STRIPER_PROFILES = {
     "ideal": {},
     # a real triangulating striper: its camera beside the laser, speckle along the stripe
     "triangulation": {"camera_shadow": True, "speckle_sigma": 1.0, "speckle_beams": 2.0, "grazing_from_deg": 60.0,
-                      "no_return_clears": False},
+                      "highlight_deg": 10.0, "no_return_clears": False},
 }
 
 
 class LaserStriper(RaySensor):
     """Line sensor (laser stripe profiler) swept along linear scan paths; triangulation semantics.
     The ``triangulation`` profile adds what its camera, ``baseline`` along the sweep, makes of the
-    stripe: shadows where the camera does not see the laser, speckle along the stripe and thinning
-    returns at grazing incidence (explore.sim.artefacts)."""
+    stripe: shadows where the camera does not see the laser, speckle along the stripe, thinning
+    returns at grazing incidence and none in a glossy surface's highlight (explore.sim.artefacts)."""
 
     name = "laser_striper"
     geometry = "line"
@@ -220,6 +226,7 @@ class LaserStriper(RaySensor):
         Param("grazing_from_deg", float, 90.0, "deg", "returns thin out (linearly in cos) from this incidence "
               "angle to max_incidence_deg", low=0.0, high=90.0),
         Param("no_return_clears", bool, True, "", "a beam without return frees the depth of field"),
+        _HIGHLIGHT,
         Param("baseline", float, 0.08, "m", "laser to camera distance along the sweep (the sensor's y axis)",
               low=1e-4),
         Param("camera_shadow", bool, False, "", "no return where the camera does not see the laser line"),

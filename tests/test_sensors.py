@@ -349,6 +349,76 @@ def test_dark_surfaces_return_in_proportion_to_their_grey_level(open_world, regi
         assert abs(kept[mask].sum() - p.sum()) <= 4 * np.sqrt((p * (1 - p)).sum()) + 1, grey
 
 
+GLOSSY = """
+name: glossy
+environment:
+  - {name: floor, box: [4.0, 4.0, 0.02], position: [0.0, 0.0, -0.01], color: [0.5, 0.5, 0.5, 1.0], specular: 0.7}
+objects: []
+region: {min: [-1, -1, 0], max: [1, 1, 1]}
+sensor: depth_camera
+"""
+
+
+@pytest.mark.parametrize("projector", [False, True])
+def test_a_glossy_highlight_saturates_where_the_mirror_sends_the_light_back(projector, open_world, registry,
+                                                                           tmp_path) -> None:
+    """A floor of specular 0.7, 1 m below a camera looking down, highlight_deg 10: the mirror reflection of a
+    beam at incidence t deviates by 2 t from the way back (coaxial), so the returns within t < 5° (8.7 cm of
+    the centre) are lost with probability 0.7 and every other one is kept. With the projector 7.5 cm along x
+    the highlight is centred half way, 3.75 cm off, where the mirror sends the projector's light into the
+    camera."""
+    pose = look_at([0.0, 0.0, 1.0], [0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0])
+    params = {"noise": "none", "width": 160, "height": 120, "max_range": 3.0, "highlight_deg": 10.0,
+              "projector_shadow": projector}
+    with _world_from(GLOSSY, open_world, tmp_path) as sim:
+        truth = _camera(registry, **{**params, "highlight_deg": 0.0}).acquire(sim, pose, np.random.default_rng(0))
+        kept = _camera(registry, **params).acquire(sim, pose, np.random.default_rng(1)).hits
+    assert truth.hits.all()
+    points = truth.points()
+    receiver = pose[:3, 3] + (0.075 * pose[:3, 0] if projector else 0.0)
+    to_camera = pose[:3, 3] - points
+    to_receiver = receiver - points
+    mirrored = to_camera * [-1.0, -1.0, 1.0]  # the beam reflected by the floor, towards where the light goes
+    cos = np.einsum("ij,ij->i", mirrored, to_receiver) / np.linalg.norm(mirrored, axis=1) / np.linalg.norm(
+        to_receiver, axis=1)
+    deviation = np.rad2deg(np.arccos(np.clip(cos, -1.0, 1.0)))
+    inside, outside = deviation < 9.5, deviation > 10.5
+    assert inside.sum() > 300 and outside.sum() > 5000
+    assert kept[outside].all()
+    share = kept[inside].mean()
+    assert share == pytest.approx(0.3, abs=4 * np.sqrt(0.21 / inside.sum()))
+    lost = points[~kept]
+    np.testing.assert_allclose(lost[:, :2].mean(axis=0), receiver[:2] / 2.0, atol=0.005)
+
+
+def test_highlights_leave_a_matte_world_as_it_was(wall_sim, registry) -> None:
+    """No body is glossy: the Kinect profile's highlights draw no random numbers, so the scan is the one
+    without them, range for range."""
+    pose = look_at([0.1, -0.2, 1.25], [0.1, -0.2, 0.0])
+    with_highlights = _camera(registry, profile="kinect", max_range=3.0)
+    without = _camera(registry, profile="kinect", max_range=3.0, highlight_deg=0.0)
+    assert with_highlights.highlight_deg == 10.0
+    a = with_highlights.acquire(wall_sim, pose, np.random.default_rng(5))
+    b = without.acquire(wall_sim, pose, np.random.default_rng(5))
+    np.testing.assert_array_equal(a.ranges, b.ranges)
+
+
+def test_a_glossy_surface_sends_back_only_its_diffuse_share(open_world, registry, tmp_path) -> None:
+    """dark_level 60 on the floor of grey level 127.5 and specular 0.7: outside the highlight a beam at
+    incidence t returns with probability min(1, 127.5 x 0.3 x cos t / 60), about 64 % (a matte floor of
+    the same grey always returns)."""
+    pose = look_at([0.0, -0.2, 1.2], [0.0, 0.0, 0.0])
+    params = {"noise": "none", "width": 160, "height": 120, "max_range": 3.0, "dark_level": 60.0}
+    with _world_from(GLOSSY, open_world, tmp_path) as sim:
+        truth = _camera(registry, noise="none", width=160, height=120, max_range=3.0).acquire(
+            sim, pose, np.random.default_rng(0))
+        kept = _camera(registry, **params).acquire(sim, pose, np.random.default_rng(1)).hits
+    assert truth.hits.all()
+    p = np.minimum(1.0, 127.5 * 0.3 * np.abs(truth.directions[:, 2]) / 60.0)
+    assert abs(kept.sum() - p.sum()) <= 4 * np.sqrt((p * (1 - p)).sum()) + 1
+    assert 0.55 < kept.mean() < 0.7
+
+
 def test_a_one_pixel_kinect_camera_measures_with_its_bias(wall_sim, registry) -> None:
     """A 1 x 1 image has no spread to normalise the bias field by: its bias is one unit-normal
     draw per frame, so the residuals over many frames keep a total of about sqrt(2) sigma."""

@@ -11,6 +11,8 @@ from explore.sim.artefacts import (
     discontinuity_mask,
     flying_pixels,
     grazing_return_probability,
+    highlight_return_probability,
+    mirror_deviation,
     quantise_disparity,
     smooth_field,
 )
@@ -40,6 +42,8 @@ __all__ = [
     "discontinuity_mask",
     "flying_pixels",
     "grazing_return_probability",
+    "highlight_return_probability",
+    "mirror_deviation",
     "noise_sigma",
     "quantise_disparity",
     "smooth_field",

@@ -49,6 +49,7 @@ class MeshWorld:
 
     def __init__(self, meshes: list[TriMesh]) -> None:
         self.raycaster = RayCaster(meshes)
+        self.specular = np.zeros(len(meshes))  # bare meshes carry no material: matte
 
     def acquire(self, sensor: RaySensor, target: Pose | ScanPath, rng: np.random.Generator) -> Scan:
         """What ``sensor`` measures here from ``target``, with every artefact it simulates except

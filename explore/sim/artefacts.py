@@ -17,6 +17,10 @@ along the optical axis, NaN where there is no return) or of the beams' geometry:
   ``grazing_from`` to the sensor's largest incidence angle) and on dark surfaces (the grey level
   of the surface's colour in pybullet's render times cos(incidence), as a Lambertian surface
   sends the emitter's light back);
+- **glossy surfaces**: a surface that reflects the share ``specular`` of the light as a mirror sends
+  only the rest, (1 - specular), back diffusely (the dark-surface model sees that share of its
+  colour), and where the mirror reflection of the emitter's light falls within ``highlight_deg`` of
+  the receiver the highlight saturates the sensor: no return there, with probability ``specular``;
 - **correlated noise**: a low-frequency bias per frame (calibration drift, temperature), smooth
   across the image, and correlated patches (the correlation window of the pattern matcher; a
   laser stripe's speckle along the stripe), on top of the independent per-pixel noise.
@@ -107,6 +111,25 @@ def dark_return_probability(intensity: Array, dark_level: float) -> Array:
     colour (0-255) times cos(incidence), as a Lambertian surface lit by the sensor's own emitter
     does: intensity / ``dark_level`` below that level, 1 above it."""
     return np.clip(np.asarray(intensity, dtype=float) / dark_level, 0.0, 1.0)
+
+
+def mirror_deviation(directions: Array, normals: Array, points: Array, receivers: Array) -> Array:
+    """Angle (rad, (n,)) between the mirror reflection of each beam (unit ``directions`` meeting surfaces of
+    unit ``normals`` at ``points``) and the direction from its point to its receiver (``receivers``, (n, 3)):
+    0 where a mirror would send the emitter's light straight into the receiver. The angle is the same with
+    emitter and receiver swapped (a reflection is its own inverse), so the beams may be either's."""
+    reflected = directions - 2.0 * np.einsum("ij,ij->i", directions, normals)[:, None] * normals
+    back = receivers - points
+    back /= np.linalg.norm(back, axis=1, keepdims=True)
+    return np.arccos(np.clip(np.einsum("ij,ij->i", reflected, back), -1.0, 1.0))
+
+
+def highlight_return_probability(specular: Array, deviation: Array, highlight_deg: float) -> Array:
+    """Probability of a return on a glossy surface (``specular``: the share of the light it reflects as a
+    mirror) where the mirror reflection deviates by ``deviation`` (rad) from the receiver: within
+    ``highlight_deg`` the highlight saturates the sensor and the return is lost with probability
+    ``specular``; elsewhere 1."""
+    return np.where(np.asarray(deviation) < np.deg2rad(highlight_deg), 1.0 - np.asarray(specular), 1.0)
 
 
 def smooth_field(frames: int, rows: int, cols: int, rng: np.random.Generator, cells: int = 4) -> np.ndarray:

@@ -14,7 +14,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from explore.core import Array, Plugin, Points3, Pose
-from explore.sim.artefacts import dark_return_probability, grazing_return_probability
+from explore.sim.artefacts import (
+    dark_return_probability,
+    grazing_return_probability,
+    highlight_return_probability,
+    mirror_deviation,
+)
 from explore.sim.scan import Scan, ScanPath
 
 if TYPE_CHECKING:
@@ -78,6 +83,7 @@ class RaySensor(Plugin, ABC):
     max_incidence_deg: float = 85.0
     grazing_from_deg: float = 90.0  # returns thin out from this incidence angle (>= max: a hard cut)
     dark_level: float = 0.0  # grey level of albedo x cos(incidence) below which returns thin out (0: off)
+    highlight_deg: float = 0.0  # a glossy surface's highlight within this of the receiver saturates (0: off)
     rate_hz: float = 30.0
     clear_from_origin: bool = True
     no_return_clears: bool = True
@@ -128,10 +134,10 @@ class RaySensor(Plugin, ABC):
     def acquire(self, sim: Simulation, target: Pose | ScanPath, rng: np.random.Generator) -> Scan:
         """Simulate one acquisition against the ground truth of ``sim``: cast every beam, drop
         the returns the sensor would not get (working range, grazing incidence, shadows of the
-        second viewpoint, dark surfaces), then :meth:`measure` the rest."""
+        second viewpoint, dark surfaces, glossy highlights), then :meth:`measure` the rest."""
         poses, timestamps = self.frames(target)
         origins, directions, frame = self._world_beams(poses, self.local_directions())
-        t_hit, _, normals = sim.raycaster.cast(origins, directions)
+        t_hit, body, normals = sim.raycaster.cast(origins, directions)
         cos_incidence = np.abs(np.einsum("ij,ij->i", normals, directions))
         grazing = cos_incidence < np.cos(np.deg2rad(self.max_incidence_deg))
         valid = np.isfinite(t_hit) & (t_hit >= self.min_range) & (t_hit <= self.max_range) & ~grazing
@@ -141,8 +147,15 @@ class RaySensor(Plugin, ABC):
         if self.shadow_offset is not None and valid.any():
             points = origins[valid] + directions[valid] * t_hit[valid, None]
             valid[np.flatnonzero(valid)[~self.lit(sim, poses, frame[valid], points)]] = False
+        specular = np.zeros(len(body))
+        specular[body >= 0] = sim.specular[body[body >= 0]]
         if self.dark_level > 0 and (albedo := self.albedo(sim, poses)) is not None:
-            p = dark_return_probability(albedo * cos_incidence, self.dark_level)
+            p = dark_return_probability(albedo * (1.0 - specular) * cos_incidence, self.dark_level)
+            valid &= rng.random(len(valid)) < p
+        if self.highlight_deg > 0 and (glossy := valid & (specular > 0)).any():
+            p = np.ones(len(valid))
+            p[glossy] = self.highlight(poses, frame[glossy], origins[glossy], directions[glossy], t_hit[glossy],
+                                       normals[glossy], specular[glossy])
             valid &= rng.random(len(valid)) < p
         ranges = self.measure(np.where(valid, t_hit, np.nan), cos_incidence, rng)
         sigmas = np.where(np.isfinite(ranges), self.sigma(np.nan_to_num(ranges)), np.nan)
@@ -195,6 +208,18 @@ class RaySensor(Plugin, ABC):
         distance = np.linalg.norm(towards, axis=1)
         t_hit, _, _ = sim.raycaster.cast(viewpoint, towards / distance[:, None])
         return t_hit >= distance - max(2e-3, 1e-3 * float(np.max(distance, initial=0.0)))
+
+    def highlight(self, poses: np.ndarray, frame: np.ndarray, origins: Points3, directions: Points3, t_hit: Array,
+                  normals: Points3, specular: Array) -> Array:
+        """Return probability (n,) of beams on glossy surfaces (``specular`` > 0, each with a hit in frame
+        ``frame`` of ``poses``) under their highlights: the receiver is the second viewpoint
+        (:attr:`shadow_offset`) when the sensor has one, else the beam's own origin (coaxial)."""
+        points = origins + directions * t_hit[:, None]
+        offset = self.shadow_offset
+        receivers = origins if offset is None else poses[frame, :3, 3] + np.einsum("nij,j->ni", poses[frame, :3, :3],
+                                                                                    offset)
+        return highlight_return_probability(specular, mirror_deviation(directions, normals, points, receivers),
+                                            self.highlight_deg)
 
     def measure(self, ranges: Array, cos_incidence: Array, rng: np.random.Generator) -> Array:
         """Measured ranges (n,) from the true ones (NaN: no return) and |cos| of the incidence

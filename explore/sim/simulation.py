@@ -36,6 +36,7 @@ class GroundTruthBody:
     mesh: TriMesh  # world frame
     is_object: bool
     known: bool
+    specular: float = 0.0  # share of the light reflected as by a mirror (BodySpec.specular)
 
 
 class RayCaster:
@@ -141,6 +142,8 @@ class Simulation:
             self.close()
             raise
         self.raycaster = RayCaster([b.mesh for b in self.bodies])
+        #: per body, in the ray caster's order: the mirror share of the light its surface reflects
+        self.specular = np.array([b.specular for b in self.bodies], dtype=float)
         self._environment_caster: RayCaster | None = None
         self.sensor = None
         self.robot = None
@@ -245,7 +248,10 @@ class Simulation:
             world_mesh = TriMesh(mesh.vertices + position, mesh.triangles)
         if not np.all(np.isfinite(world_mesh.vertices)):
             raise BadInput(str(self.spec.path), where, "pose gives non-finite coordinates")
-        self.bodies.append(GroundTruthBody(body.name, body_id, world_mesh, is_object, body.known))
+        if body.specular > 0:  # the colour render shows the highlight too
+            for link in range(-1, p.getNumJoints(body_id, physicsClientId=self.client)):
+                p.changeVisualShape(body_id, link, specularColor=[body.specular] * 3, physicsClientId=self.client)
+        self.bodies.append(GroundTruthBody(body.name, body_id, world_mesh, is_object, body.known, body.specular))
 
     def _primitive_or_mesh(self, body: BodySpec, where: str) -> TriMesh:
         if body.shape == "box":

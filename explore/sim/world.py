@@ -50,6 +50,7 @@ class BodySpec:
     known: bool = False
     color: tuple[float, float, float, float] = (0.7, 0.7, 0.7, 1.0)
     drop: bool = False  # on a body with z given: falls from z onto the surface below, not onto the body's top
+    specular: float = 0.0  # share of the light the surface reflects as a mirror (glossy: glazed, polished)
 
 
 @dataclass(frozen=True)
@@ -254,8 +255,12 @@ def _body(data: Any, file: str, prefix: str, world_dir: Path, is_object: bool) -
         raise BadInput(file, f.where("color"), f"RGB(A) components lie in [0, 1], got {brief(list(color))}"
                        + (" (0-255 values? divide by 255)" if max(color) > 1.0 else ""))
     color = color if len(color) == 4 else (*color, 1.0)
+    specular = f.number("specular", 0.0)
+    if not 0.0 <= specular <= 1.0:
+        raise BadInput(file, f.where("specular"), f"the mirror share of the reflected light lies in [0, 1], "
+                       f"got {brief(specular)}")
     f.check_unknown()
-    return BodySpec(name, position, rpy, shape, dims, source, scale, size, on, known, color, drop)
+    return BodySpec(name, position, rpy, shape, dims, source, scale, size, on, known, color, drop, specular)
 
 
 def _plugin(data: Any, file: str, key: str) -> PluginSpec:

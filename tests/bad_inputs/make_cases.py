@@ -91,6 +91,8 @@ WORLDS: dict[str, tuple[str, list[tuple[str, str]] | str]] = {
     "color_short": ("expected a list of 3 or 4 numbers", [("on_top_of: pedestal", "on_top_of: pedestal\n    color: [1, 0]")]),
     "color_0_255": ("divide by 255", [("on_top_of: pedestal", "on_top_of: pedestal\n    color: [255, 0, 0]")]),
     "color_negative": ("components lie in [0, 1]", [("on_top_of: pedestal", "on_top_of: pedestal\n    color: [0.5, -0.1, 0, 1]")]),
+    "specular_above_one": ("mirror share of the reflected light lies in [0, 1]", [("on_top_of: pedestal", "on_top_of: pedestal\n    specular: 1.5")]),
+    "specular_word": ("specular: expected a number", [("on_top_of: pedestal", "on_top_of: pedestal\n    specular: shiny")]),
     "rpy_strings": ("expected a number", [("rpy_deg: [90, 0, 0]", "rpy_deg: [ninety, 0, 0]")]),
     "duplicate_body_names": ("used by two bodies", [("name: bunny", "name: pedestal")]),
     "object_outside_region": ("region", [("max: [0.13, 0.13, 0.72]", "max: [0.13, 0.13, 0.60]")]),
