@@ -414,10 +414,11 @@ class Simulation:
         rows = []
         for body in self.bodies:
             lo, hi = body.mesh.bounds
+            role = ("object, known" if body.known else "object, unknown") if body.is_object else "environment"
             rows.append(
                 {
                     "name": body.name,
-                    "role": ("object, known" if body.known else "object, unknown") if body.is_object else "environment",
+                    "role": role + (f", glossy {body.specular:g}" if body.specular > 0 else ""),
                     "size_m": np.round(hi - lo, 3).tolist(),
                     "center_m": np.round(0.5 * (lo + hi), 3).tolist(),
                     "triangles": int(len(body.mesh.triangles)),
