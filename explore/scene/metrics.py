@@ -196,6 +196,8 @@ def evaluate(session: SceneSession) -> dict[str, Any]:
                 metrics = GroundTruthMetrics(sim, gt_mesh=body.mesh)
                 row["coverage"] = float(metrics.coverage(points))
                 row["coverage_estimate"] = obj.coverage_estimate
+                if session.short_of_target(obj):
+                    row["result"] = "partial"
             # wrong matches among the last hypotheses and where they were stopped
             stopped = {(r["model"], round(float(r["q_h"]), 9)): r["by"] for r in obj.rejected}
             accepted_before = wrong["accepted"]

@@ -213,10 +213,12 @@ class SceneSession:
         missed = self.unexplained_surface()
         if missed:
             places = ", ".join(f"{m['voxels']} voxels around {m['centre']}" for m in missed[:3])
+            if self.budget_left <= 0:  # more views might have explained it
+                return BUDGET, (f"view budget of {self.settings.max_views} used up with occupied space in the "
+                                f"region that no object explains ({places})")
             return FAILURE, (f"occupied space in the region that no object explains ({places}): an object the "
                              "segmentation missed")
-        modelled = self.by_status(MODELLED)
-        below = [o for o in modelled if not o.coverage_estimate >= target]
+        below = [o for o in self.by_status(MODELLED) if self.short_of_target(o)]
         unreached = [o for o in below if o.modelling_end == NO_VIEW]
         stalled = [o for o in below if o.modelling_end == NO_PROGRESS]
         stuck = [str(o.id) for o in self.by_status(UNKNOWN) if o.modelling_end == NO_VIEW]
@@ -245,6 +247,13 @@ class SceneSession:
             return BUDGET, (f"view budget of {self.settings.max_views} used up with object(s) "
                             f"{', '.join(unexplained)} unexplained")
         return "", ""
+
+    def short_of_target(self, obj: SceneObject) -> bool:
+        """``obj`` was modelled below the coverage target (ĉ_m) for want of a reachable view or of progress, or
+        its modelling was cut by the scene's view budget: a partial model. Its own scan budget (Kriegel's
+        n_abort) ends the NBS loop as the thesis does, and counts as done."""
+        return (obj.status == MODELLED and not obj.coverage_estimate >= self.settings.model_coverage
+                and obj.modelling_end in (NO_VIEW, NO_PROGRESS, VIEW_BUDGET))
 
     def unexplained_surface(self) -> list[dict[str, Any]]:
         """Clusters of occupied PVS voxels (p ≥ 0.75) in the region, at least ``UNEXPLAINED_AREA`` of
