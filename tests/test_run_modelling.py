@@ -135,9 +135,17 @@ def test_positioning_noise_collision_stops_or_is_recorded(tmp_path, capsys) -> N
 
 
 def test_unreachable_initial_scan_fails_with_metrics(tmp_path, capsys) -> None:
-    """A mast camera at 1.3 m cannot take the pedestal's initial scans: exit 1, reason, metrics, no mesh."""
-    code, m, _ = _run(["model_object", "--world", "bunny_pedestal", "--robot", "mobile_base",
-                       "--out", str(tmp_path / "r")], capsys)
+    """A mast camera at 1.3 m cannot take the pedestal's initial scans: exit 1, reason, metrics, no mesh.
+    (Without a base pose the base would start at the origin, inside the pedestal: bad input, exit 2.)"""
+    from explore.sim import find_world
+
+    world = tmp_path / "bunny_mast.yaml"
+    world.write_text(find_world("bunny_pedestal").read_text().replace(
+        "robot:\n  plugin: free_flyer", "robot:\n  plugin: mobile_base\n  base: [0.6, 0.0, 0.0, 180]"))
+    code, _, err = _run(["model_object", "--world", "bunny_pedestal", "--robot", "mobile_base",
+                         "--out", str(tmp_path / "inside")], capsys)
+    assert code == 2 and "robot.base: the robot starts inside 'bunny', 'pedestal' at the origin" in err[0], err
+    code, m, _ = _run(["model_object", "--world", str(world), "--out", str(tmp_path / "r")], capsys)
     assert code == 1 and m["status"] == "failure" and m["scans"] == 0
     assert m["reason"] == ("Plan initial scan: no reachable initial scan (13 initial scans tried: 13 unreachable; "
                            "they stand 0.325 m from the region, the sensor's optimal distance)")

@@ -169,10 +169,12 @@ class Simulation:
         self.robot = registry.create("robot", name or registry.default("robot", "world")[0], params, file, "robot")
         if hasattr(self.robot, "attach"):
             self.robot.attach(self)
-        if self.spec.robot.base is not None and hasattr(self.robot, "collisions"):
+        placed = self.spec.robot.base is not None
+        if (placed or getattr(self.robot, "base_dofs", ())) and hasattr(self.robot, "collisions"):
             inside = sorted({name for name in self.robot.collisions(self.robot.q, "true", 0.0) if name != "self"})
-            if inside:
-                raise BadInput(file, "robot.base", f"the robot starts inside {', '.join(map(repr, inside))}")
+            if inside:  # a base the world does not place starts at the origin
+                raise BadInput(file, "robot.base", f"the robot starts inside {', '.join(map(repr, inside))}"
+                               + ("" if placed else " at the origin: give its pose, base: [x, y, z, yaw_deg]"))
 
     # -- bodies --------------------------------------------------------------------------
     def _support(self, name: str) -> GroundTruthBody:
