@@ -91,7 +91,8 @@ def one_seed(first: str, second: list[str], seed: int, tmp: Path) -> list[dict]:
     db.parent.mkdir(parents=True)
     a = _run(first, seed, db, tmp / "first" / "run")
     first_calls = q_h_calls(a, first, seed)
-    modelled = {o["name"]: o.get("model") for o in a.get("objects", []) if o.get("result") == "modelled"}
+    # every model the first run stored, also those short of the coverage target
+    modelled = {o["name"]: o.get("model") for o in a.get("objects", []) if o.get("result") in ("modelled", "partial")}
     rows = []
     for world in second:
         copy = tmp / world / "objects.db"

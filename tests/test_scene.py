@@ -887,15 +887,15 @@ DUCK = "size: 0.10, rpy_deg: [90, 0, 0], position: [0.05, -0.12]"
 @pytest.mark.parametrize("duck, camera, result, reason", [
     (DUCK, "160, height: 120", "missed", "object(s) 0 (37 points) seen with too few points to tell from noise"),
     (DUCK, "320, height: 240", "unknown", "object(s) 0 left unknown: no view to model it could be reached"),
-    (DUCK.replace("0.10", "0.16").replace("-0.12", "-0.15"), "320, height: 240", "modelled",
+    (DUCK.replace("0.10", "0.16").replace("-0.12", "-0.15"), "320, height: 240", "partial",
      "object(s) 0 (ĉ_m 0.57, 0 scans) modelled below the coverage target 0.75: no reachable view was left"),
 ], ids=["glimpsed", "no_mesh", "one_view_model"])
 def test_an_object_no_view_of_which_can_be_reached_ends_the_run_no_candidates(registry, tmp_path, duck, camera,
                                                                                result, reason):
     """The fenced table seen from just beyond the ring, where every closer view lies inside the ring: the
     overview alone sees the duck. With few pixels it is a glimpse too small to tell from noise; with
-    more it is an unknown object one view cannot mesh; larger, it is meshed from that view alone. The
-    run ends no_candidates naming the object in each case, not success (nor failure after eight
+    more it is an unknown object one view cannot mesh; larger, it is meshed from that view alone, a partial
+    model. The run ends no_candidates naming the object in each case, not success (nor failure after eight
     useless rounds)."""
     from explore.runtime import RunConfig, execute
 
@@ -1230,14 +1230,15 @@ def test_views_that_each_fit_part_of_a_model_do_not_recognise_an_object_seen_fro
     three views each fitted part of the duck (q_h ≥ 0.5, the PVS agreeing) where all views together
     did not, and the run accepted the sorter as the duck. Agreeing single views stand in for the merged
     ones only where a pose graph moved the views (a noisy base); a free flyer's views are where it was,
-    and the sorter is modelled."""
+    and the sorter is modelled (partially)."""
     from explore.runtime import RunConfig, execute
 
     run = execute(RunConfig(tree="scene_exploration", world=_world(tmp_path, KIVA_HIGH), seed=0, out=tmp_path / "run",
                             settings={"start_scene.db": str(tmp_path / "objects.db")}), registry)
     rows = {r["name"]: r for r in run.metrics["objects"]}
     assert run.metrics["wrong_matches"]["accepted"] == 0, rows
-    assert rows["sorter"]["result"] == "modelled" and rows["duck"]["correct_model"], rows
+    # a model of its own, short of the coverage target: the bin lets no view reach all of it
+    assert rows["sorter"]["result"] == "partial" and rows["duck"]["correct_model"], rows
 
 
 def test_the_pose_error_of_a_symmetric_object_is_taken_to_its_nearest_symmetric_pose() -> None:
