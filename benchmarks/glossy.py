@@ -62,20 +62,23 @@ def main(argv: list[str] | None = None) -> int:
         glossy = load_world_spec(args.world)
     except BadInput as error:
         parser.error(f"--world: {error}")
-    names = [b.name for b in glossy.environment + glossy.objects if b.specular > 0]
+    shares = {b.name: b.specular for b in glossy.environment + glossy.objects if b.specular > 0}
+    names = list(shares)
     if not names:
         parser.error(f"--world: {args.world}: no body has specular > 0")
     registry = make_registry()
-    matte = dataclasses.replace(glossy, objects=tuple(dataclasses.replace(b, specular=0.0) for b in glossy.objects),
-                                environment=tuple(dataclasses.replace(b, specular=0.0) for b in glossy.environment))
+    def matte_bodies(bodies: tuple) -> tuple:
+        return tuple(dataclasses.replace(b, specular=0.0) for b in bodies)
+
+    matte = dataclasses.replace(glossy, objects=matte_bodies(glossy.objects),
+                                environment=matte_bodies(glossy.environment))
     rows = []
     for profile in PROFILES:
-        shares = {kind: returned_share(spec, registry, names, profile, args.views)
-                  for kind, spec in (("glossy", glossy), ("matte", matte))}
+        seen = {kind: returned_share(spec, registry, names, profile, args.views)
+                for kind, spec in (("glossy", glossy), ("matte", matte))}
         for name in names:
-            (met, kept_glossy), (_, kept_matte) = shares["glossy"][name], shares["matte"][name]
-            specular = next(b.specular for b in glossy.environment + glossy.objects if b.name == name)
-            rows.append({"profile": profile, "body": name, "specular": specular, "beams": met,
+            (met, kept_glossy), (_, kept_matte) = seen["glossy"][name], seen["matte"][name]
+            rows.append({"profile": profile, "body": name, "specular": shares[name], "beams": met,
                          "returned_glossy": kept_glossy / met, "returned_matte": kept_matte / met})
     if args.json:
         print(json.dumps(rows, indent=2))

@@ -147,12 +147,12 @@ class RaySensor(Plugin, ABC):
         if self.shadow_offset is not None and valid.any():
             points = origins[valid] + directions[valid] * t_hit[valid, None]
             valid[np.flatnonzero(valid)[~self.lit(sim, poses, frame[valid], points)]] = False
-        specular = np.zeros(len(body))
-        specular[body >= 0] = sim.specular[body[body >= 0]]
+        # the mirror share of the surface each beam meets (a matte world: 0, no per-beam array)
+        specular = np.where(body >= 0, sim.specular[body], 0.0) if np.any(sim.specular) else 0.0
         if self.dark_level > 0 and (albedo := self.albedo(sim, poses)) is not None:
             p = dark_return_probability(albedo * (1.0 - specular) * cos_incidence, self.dark_level)
             valid &= rng.random(len(valid)) < p
-        if self.highlight_deg > 0 and (glossy := valid & (specular > 0)).any():
+        if self.highlight_deg > 0 and np.any(specular) and (glossy := valid & (specular > 0)).any():
             p = np.ones(len(valid))
             p[glossy] = self.highlight(poses, frame[glossy], origins[glossy], directions[glossy], t_hit[glossy],
                                        normals[glossy], specular[glossy])
